@@ -1,0 +1,30 @@
+"""The ``webline`` command: one sub-command per module, dispatched by name.
+
+Exit codes: 0 ok, 1 run failure, 2 bad input (argparse uses 2 as well).
+"""
+import importlib
+import sys
+
+# sub-command -> (module with main(argv) -> int, one-line help)
+COMMANDS = {
+    "build-fmus": ("fmus.build", "build every element FMU into one folder"),
+}
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: webline COMMAND [--help] ...\n\ncommands:")
+        for name, (_, text) in COMMANDS.items():
+            print(f"  {name:<12} {text}")
+        return 0 if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(f"webline: unknown command {name!r}; try 'webline --help'", file=sys.stderr)
+        return 2
+    module = importlib.import_module(COMMANDS[name][0])
+    return module.main(rest)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,279 @@
+"""Base class that turns a physics element into a well-formed pythonfmu slave.
+
+Bundled into every FMU together with ``webline.physics``. What it adds to
+pythonfmu 0.7's ``Fmi2Slave``:
+
+* declarations as data (:class:`Var`): name, unit, start, description, and for
+  outputs the inputs they really depend on;
+* a ``modelDescription.xml`` that passes ``fmpy validate`` and that foreign
+  importers can trust: UnitDefinitions, a unit on every Real, outputs
+  ``initial="exact"``, ``ModelStructure/Outputs`` with true dependencies (a
+  state output depends on no input, so OMSimulator sees no false algebraic
+  loop);
+* one generic integrator around an element model (``webline.physics.element``),
+  so the FMU script is declarations plus ``make_model()``;
+* parameter checks at initialisation that name the variable. pythonfmu can
+  only return OK or fmi2Fatal from ``fmi2ExitInitializationMode``, so an
+  invalid parameter is logged (status error, naming the variable) and then
+  raised, which the host sees as fmi2Fatal;
+* ``do_step`` that never lets an exception escape (pythonfmu would turn it
+  into fmi2Fatal with "unknown error"): the traceback is logged and the step
+  returns fmi2Discard; a state that stops being finite does the same.
+"""
+import math
+import traceback
+from xml.etree.ElementTree import Element, SubElement
+
+from pythonfmu import Fmi2Slave, Real
+from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
+
+from webline import __version__
+from webline.physics.integrate import integrate
+
+# SI base-unit exponents of every unit an FMU may declare (FMI 2.0 BaseUnit).
+UNITS = {
+    "1": {},
+    "m": {"m": 1},
+    "s": {"s": 1},
+    "kg": {"kg": 1},
+    "rad": {"rad": 1},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "Pa": {"kg": 1, "m": -1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "N.m.s": {"kg": 1, "m": 2, "s": -1},
+    "N.m/rad": {"kg": 1, "m": 2, "s": -2, "rad": -1},
+    "N.m.s/rad": {"kg": 1, "m": 2, "s": -1, "rad": -1},
+    "kg.m2": {"kg": 1, "m": 2},
+    "kg/m3": {"kg": 1, "m": -3},
+    "m/s": {"m": 1, "s": -1},
+    "m/s2": {"m": 1, "s": -2},
+    "rad/s": {"rad": 1, "s": -1},
+    "1/s": {"s": -1},
+    "Hz": {"s": -1},
+    "m/(s.N)": {"s": 1, "kg": -1},
+    "N.m/(rad/s)": {"kg": 1, "m": 2, "s": -1, "rad": -1},
+}
+
+N_HARMONICS = 8  # Fourier terms per eccentric end; the paper uses 6 ({32}).
+
+
+class Var:
+    """Declaration of one Real variable.
+
+    ``depends`` (outputs only): names of the inputs this output depends on
+    directly (feed-through). Empty for outputs that are functions of states.
+    ``check``: a callable value -> error string or None, run at initialisation.
+    """
+
+    __slots__ = ("name", "unit", "start", "description", "depends", "check", "attr")
+
+    def __init__(self, name, unit, start, description, depends=(), check=None, attr=None):
+        if unit not in UNITS:
+            raise KeyError(f"unit {unit!r} of {name!r} is not in webline.fmi_slave.UNITS")
+        self.name = name
+        self.unit = unit
+        self.start = float(start)
+        self.description = description
+        self.depends = tuple(depends)
+        self.check = check
+        self.attr = attr or name.replace(".", "_").replace("[", "_").replace("]", "")
+
+
+def positive(value):
+    return None if value > 0.0 and math.isfinite(value) else f"must be > 0 (got {value!r})"
+
+
+def non_negative(value):
+    return None if value >= 0.0 and math.isfinite(value) else f"must be >= 0 (got {value!r})"
+
+
+def finite(value):
+    return None if math.isfinite(value) else f"must be finite (got {value!r})"
+
+
+def fourier_vars(prefix, where):
+    """Parameters C[j] (m), psi[j] (rad), j = 1..N_HARMONICS, for one eccentric end."""
+    out = []
+    for j in range(1, N_HARMONICS + 1):
+        out.append(Var(f"{prefix}.C[{j}]", "m", 0.0,
+                       f"Fourier amplitude of harmonic {j} of the span-length change caused by the {where} element ({{28}})",
+                       check=finite))
+        out.append(Var(f"{prefix}.psi[{j}]", "rad", 0.0,
+                       f"Phase of harmonic {j} of the span-length change caused by the {where} element ({{28}})",
+                       check=finite))
+    return out
+
+
+class ElementSlave(Fmi2Slave):
+    """A primitive element model (see ``webline.physics.element``) as an FMI 2.0 slave.
+
+    Subclasses declare ``PARAMETERS``, ``INPUTS`` and ``OUTPUTS`` (lists of
+    :class:`Var`; inputs and outputs named as in the model's ``INPUTS`` and
+    ``OUTPUTS``) and ``make_model()``, which builds the model from the
+    parameter attributes. The wrapper integrates the model's states over each
+    macro step with RK4 sub-steps no longer than ``max_step``, holding the
+    inputs (or advancing the model's ``EXTRAPOLATE`` inputs linearly).
+    Outputs that depend on inputs are recomputed whenever they are read, so a
+    master can resolve feed-through chains at a communication point.
+    """
+
+    author = "webline"
+    license = "MIT"
+    version = __version__
+    PARAMETERS = ()
+    INPUTS = ()
+    OUTPUTS = ()
+    MAX_STEP = Var("max_step", "s", 1.0e-3, "Longest internal RK4 sub-step", check=positive)
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.failed = False
+        self.model = None
+        self.time = 0.0
+        self.since_inputs = 0.0  # time since the inputs were last set
+        self.x = []
+        for v in self.parameters():
+            self._declare(v, Fmi2Causality.parameter, Fmi2Variability.fixed, None)
+        for v in self.INPUTS:
+            self._declare(v, Fmi2Causality.input, Fmi2Variability.continuous, None, is_input=True)
+        for v in self.OUTPUTS:
+            self._declare(v, Fmi2Causality.output, Fmi2Variability.continuous, Fmi2Initial.exact,
+                          refresh=bool(v.depends))
+
+    @classmethod
+    def parameters(cls):
+        return (*cls.PARAMETERS, cls.MAX_STEP)
+
+    def _declare(self, v, causality, variability, initial, is_input=False, refresh=False):
+        setattr(self, v.attr, v.start)
+        attr = v.attr
+
+        def get():
+            if refresh and self.model is not None and not self.failed:
+                self._refresh_outputs()
+            return getattr(self, attr)
+
+        def set_(value):
+            setattr(self, attr, value)
+            if is_input:
+                self.since_inputs = 0.0
+
+        self.register_variable(Real(
+            v.name, causality=causality, variability=variability, initial=initial,
+            description=f"{v.description} [{v.unit}]", getter=get, setter=set_))
+
+    def values(self, prefix, n=N_HARMONICS, field="C"):
+        """List of the array parameter ``prefix.field[1..n]``."""
+        return [getattr(self, f"{prefix}_{field}_{j}") for j in range(1, n + 1)]
+
+    def make_model(self):
+        raise NotImplementedError
+
+    # ---- lifecycle -----------------------------------------------------------------
+    def exit_initialization_mode(self):
+        problems = []
+        for v in self.parameters():
+            if v.check is not None:
+                reason = v.check(getattr(self, v.attr))
+                if reason:
+                    problems.append((v.name, reason))
+        try:
+            self.model = self.make_model()
+            if not problems:
+                problems.extend(self.model.problems())
+        except Exception:
+            problems.append(("(model)", traceback.format_exc()))
+        if problems:
+            for name, reason in problems:
+                self.log(f"{self.instance_name}: parameter '{name}' {reason}", Fmi2Status.error)
+            self.failed = True
+            # pythonfmu maps any exception here to fmi2Fatal: the only non-OK
+            # status it can return from initialisation.
+            raise ValueError("; ".join(f"{n} {r}" for n, r in problems))
+        self._input_index = [(i, self.model.INPUTS.index(rate))
+                             for i, rate in ((self.model.INPUTS.index(a), r)
+                                             for a, r in self.model.EXTRAPOLATE.items())]
+        self._input_attrs = [self._attr_of(n) for n in self.model.INPUTS]
+        self._output_attrs = [self._attr_of(n) for n in self.model.OUTPUTS]
+        self.x = list(self.model.initial_state())
+        self._refresh_outputs()
+        return True
+
+    def _attr_of(self, name):
+        return next(v.attr for v in (*self.INPUTS, *self.OUTPUTS) if v.name == name)
+
+    def _inputs(self, s):
+        """Model inputs ``s`` seconds after they were set (extrapolated ones advanced)."""
+        u = [getattr(self, a) for a in self._input_attrs]
+        if s:
+            for i, r in self._input_index:
+                u[i] += u[r] * s
+        return u
+
+    def _refresh_outputs(self):
+        y = self.model.outputs(self.time, self.x, self._inputs(self.since_inputs))
+        for a, value in zip(self._output_attrs, y):
+            setattr(self, a, value)
+
+    def do_step(self, current_time, step_size):
+        if self.failed:
+            return False
+        try:
+            if self.x:
+                t0, s0 = current_time, self.since_inputs
+                model, inputs = self.model, self._inputs
+                held = None if self._input_index else inputs(0.0)
+
+                def f(t, x):
+                    return model.derivatives(t, x, held if held is not None else inputs(s0 + t - t0))
+
+                self.x = integrate(f, current_time, self.x, step_size, self.max_step)
+            self.time = current_time + step_size
+            self.since_inputs += step_size
+            self._refresh_outputs()
+        except Exception:
+            self.failed = True
+            self.log(f"{self.instance_name}: step at t={current_time:.6g} s failed\n"
+                     f"{traceback.format_exc()}", Fmi2Status.error)
+            return False
+        for v in self.OUTPUTS:
+            value = getattr(self, v.attr)
+            if not math.isfinite(value):
+                self.failed = True
+                self.log(f"{self.instance_name}: output '{v.name}' became {value} at "
+                         f"t={self.time:.6g} s (diverged)", Fmi2Status.error)
+                return False
+        return True
+
+    # ---- modelDescription.xml ------------------------------------------------------
+    def to_xml(self, model_options=dict()):
+        root = super().to_xml(model_options)
+        declared = {v.name: v for v in (*self.parameters(), *self.INPUTS, *self.OUTPUTS)}
+        variables = root.find("ModelVariables")
+        index = {}
+        used = set()
+        for i, sv in enumerate(variables.findall("ScalarVariable"), start=1):
+            name = sv.get("name")
+            index[name] = i
+            v = declared[name]
+            real = sv.find("Real")
+            real.set("unit", v.unit)
+            used.add(v.unit)
+        # UnitDefinitions must follow CoSimulation (FMI 2.0 schema order).
+        units = Element("UnitDefinitions")
+        for u in sorted(used):
+            unit = SubElement(units, "Unit", name=u)
+            SubElement(unit, "BaseUnit", {k: str(e) for k, e in UNITS[u].items()})
+        cosim = root.find("CoSimulation")
+        root.insert(list(root).index(cosim) + 1, units)
+
+        structure = root.find("ModelStructure")
+        outputs = structure.find("Outputs")
+        if outputs is not None:
+            for unknown in outputs.findall("Unknown"):
+                i = int(unknown.get("index"))
+                v = next(v for v in self.OUTPUTS if index[v.name] == i)
+                deps = " ".join(str(index[d]) for d in v.depends)
+                unknown.set("dependencies", deps)
+                unknown.set("dependenciesKind", " ".join("dependent" for _ in v.depends))
+        return root
