@@ -1,0 +1,295 @@
+"""Monolithic reference of a System: the same physics models in one ODE, no co-simulation.
+
+Every component's model is built exactly as its FMU builds it, without FMI:
+the FMU script of the component's model (``fmus/webline_*.py``) is imported
+in-process, its class is instantiated, parameters and input start values are
+set through its registered variables (the FMI variable names), and the FMI
+initialisation calls run (``exit_initialization_mode`` checks the parameters
+and calls ``make_model()``). The models are then assembled into one ODE:
+
+* the state vector is the concatenation of all models' states, in component order;
+* at each right-hand-side evaluation the outputs are computed in topological
+  order of feed-through (an output that depends on inputs, per the FMU's
+  declared ``depends``, is computed once the outputs feeding those inputs are
+  known), routed through the connections into the inputs, and then every
+  model's ``derivatives`` is called with the current inputs.
+
+Inputs that no connection feeds keep their start values. Angles are exact
+states of the rotating elements, so no input extrapolation is needed.
+
+``simulate_reference(system)`` solves it with ``scipy.integrate.solve_ivp``
+(LSODA, rtol 1e-8 by default) and samples every output at the master's output
+times; columns are named ``<component>.<variable>`` as in the master's result.
+"""
+import importlib
+import math
+import time as _time
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+FMU_DIR = Path(__file__).resolve().parent.parent / "fmus"
+
+
+class AlgebraicLoop(ValueError):
+    """The connections close a loop of feed-through outputs (no state breaks it)."""
+
+
+# ---- FMU classes, in-process -----------------------------------------------------------
+_CLASSES = None
+
+
+def fmu_classes():
+    """{model name: FMU slave class} of every script ``fmus/webline_*.py``.
+
+    Scripts are imported as ``fmus.webline_<x>``, a module name distinct from
+    the top-level ``webline_<x>`` that pythonfmu uses when an FMU is loaded in
+    the same process, so the two never shadow each other.
+    """
+    global _CLASSES
+    from fmus.build import model_name, scripts
+    found = {model_name(s): s for s in scripts()}
+    if _CLASSES is None or set(_CLASSES) != set(found):
+        classes = {}
+        for model, script in found.items():
+            module = importlib.import_module(f"fmus.{Path(script).stem}")
+            classes[model] = getattr(module, model)
+        _CLASSES = classes
+    return _CLASSES
+
+
+def instantiate(component, start_time=0.0, stop_time=None):
+    """FMU slave object of ``component`` with its parameters and input starts set and
+    initialised (its ``model`` attribute built by ``make_model()``), as an FMU host would."""
+    classes = fmu_classes()
+    if component.model not in classes:
+        raise KeyError(f"component {component.name!r}: no FMU script for model {component.model!r} "
+                       f"(known: {', '.join(sorted(classes))})")
+    slave = classes[component.model](instance_name=component.name)
+    variables = {v.name: v for v in slave.vars.values()}
+    for group in (component.parameters, component.inputs):
+        for name, value in group.items():
+            if name not in variables:
+                raise KeyError(f"component {component.name!r} ({component.model}) has no variable {name!r}")
+            setter = variables[name].setter
+            if setter is None:
+                raise KeyError(f"variable {component.name}.{name} cannot be set")
+            setter(float(value))
+    slave.setup_experiment(start_time, stop_time, None)
+    slave.enter_initialization_mode()
+    slave.exit_initialization_mode()  # checks parameters (ValueError naming them), builds the model
+    if slave.model is None:
+        raise RuntimeError(f"component {component.name!r}: the FMU built no model")
+    return slave
+
+
+# ---- the assembled ODE -----------------------------------------------------------------
+class ReferenceSystem:
+    """A System compiled into one ODE ``dx/dt = rhs(t, x)`` over all models' states.
+
+    Attributes: ``names`` (component names), ``models``, ``slaves``, ``x0``
+    (initial state, numpy), ``state_names`` (``<component>.<state>``),
+    ``columns`` (``<component>.<output>`` for every output, in ``outputs()`` order).
+    """
+
+    def __init__(self, system):
+        problems = system.check()
+        if problems:
+            raise ValueError("system is not well formed:\n  " + "\n  ".join(problems))
+        exp = system.experiment
+        self.system = system
+        self.slaves = [instantiate(c, exp.start, exp.stop) for c in system.components]
+        self.names = [c.name for c in system.components]
+        self.models = [s.model for s in self.slaves]
+        index = {n: i for i, n in enumerate(self.names)}
+
+        # inputs (persistent lists, updated in place) and state slices
+        self.u = []
+        self.offsets = []
+        x0, self.state_names = [], []
+        for c, slave, model in zip(system.components, self.slaves, self.models):
+            variables = {v.name: v for v in slave.vars.values()}
+            self.u.append([float(variables[n].getter()) for n in model.INPUTS])
+            xs = list(model.initial_state())
+            if len(xs) != len(model.STATES):
+                raise ValueError(f"{c.name}: initial_state() has {len(xs)} values for STATES {model.STATES}")
+            self.offsets.append((len(x0), len(x0) + len(xs)))
+            x0 += xs
+            self.state_names += [f"{c.name}.{s}" for s in model.STATES]
+        self.x0 = np.array(x0, dtype=float)
+        self.columns = [f"{n}.{o}" for n, m in zip(self.names, self.models) for o in m.OUTPUTS]
+        self.y = [[0.0] * len(m.OUTPUTS) for m in self.models]
+
+        # which output feeds each input
+        feeder = {}  # (comp, input idx) -> (comp, output idx)
+        self.routes = []  # (src comp, src out idx, dst comp, dst in idx)
+        for k in system.connections:
+            s, d = index[k.src], index[k.dst]
+            ms, md = self.models[s], self.models[d]
+            if k.src_var not in ms.OUTPUTS:
+                raise KeyError(f"connection {k}: {k.src}.{k.src_var} is not an output of {system.components[s].model} "
+                               f"(outputs: {', '.join(ms.OUTPUTS)})")
+            if k.dst_var not in md.INPUTS:
+                raise KeyError(f"connection {k}: {k.dst}.{k.dst_var} is not an input of {system.components[d].model} "
+                               f"(inputs: {', '.join(md.INPUTS)})")
+            o, i = ms.OUTPUTS.index(k.src_var), md.INPUTS.index(k.dst_var)
+            feeder[(d, i)] = (s, o)
+            self.routes.append((s, o, d, i))
+
+        # feed-through dependencies (from the FMU declarations) -> levels of calls
+        deps = {}  # (comp, out idx) -> set of (comp, out idx) it needs first
+        for ci, (slave, model) in enumerate(zip(self.slaves, self.models)):
+            declared = {v.name: v.depends for v in type(slave).OUTPUTS}
+            for o, name in enumerate(model.OUTPUTS):
+                needs = set()
+                for inp in declared.get(name, ()):
+                    if inp in model.INPUTS:
+                        f = feeder.get((ci, model.INPUTS.index(inp)))
+                        if f is not None:
+                            needs.add(f)
+                deps[(ci, o)] = needs
+        self.schedule = self._schedule(deps)
+
+        # state-carrying components, for derivatives
+        self.stateful = [(ci, a, b) for ci, (a, b) in enumerate(self.offsets) if b > a]
+
+    def _schedule(self, deps):
+        """Kahn levels of output nodes, each level grouped by component:
+        list of (comp, [(out idx, [(dst input list, dst idx), ...]), ...])."""
+        remaining = {n: set(d) for n, d in deps.items()}
+        done = set()
+        calls = []
+        while remaining:
+            ready = sorted(n for n, d in remaining.items() if d <= done)
+            if not ready:
+                loop = ", ".join(f"{self.names[c]}.{self.models[c].OUTPUTS[o]}" for c, o in sorted(remaining))
+                raise AlgebraicLoop(f"algebraic loop among feed-through outputs: {loop}")
+            by_comp = {}
+            for c, o in ready:
+                by_comp.setdefault(c, []).append(o)
+            for c, outs in sorted(by_comp.items()):
+                entries = []
+                for o in outs:
+                    dests = [(self.u[d], i) for (s, so, d, i) in self.routes if s == c and so == o]
+                    entries.append((o, dests))
+                calls.append((c, self.models[c], self.y[c], entries))
+            for n in ready:
+                del remaining[n]
+                done.add(n)
+        return calls
+
+    def _evaluate(self, t, xl):
+        """Compute all outputs at (t, xl) and route them into the inputs."""
+        offsets, u = self.offsets, self.u
+        for c, model, y, entries in self.schedule:
+            a, b = offsets[c]
+            values = model.outputs(t, xl[a:b], u[c])
+            for o, dests in entries:
+                v = values[o]
+                y[o] = v
+                for ulist, i in dests:
+                    ulist[i] = v
+
+    def rhs(self, t, x):
+        xl = x.tolist()
+        self._evaluate(t, xl)
+        dx = [0.0] * len(xl)
+        u, models = self.u, self.models
+        for c, a, b in self.stateful:
+            dx[a:b] = models[c].derivatives(t, xl[a:b], u[c])
+        return np.array(dx)
+
+    def outputs(self, t, x):
+        """All outputs (in ``columns`` order) at time t and state x."""
+        self._evaluate(t, list(x) if not isinstance(x, np.ndarray) else x.tolist())
+        return [v for y in self.y for v in y]
+
+    def breakpoints(self):
+        """Times where an input signal has a kink (Profile knots), inside the experiment."""
+        exp = self.system.experiment
+        pts = set()
+        for c in self.system.components:
+            if c.model == "Profile":
+                n = int(round(c.parameters.get("n", 0)))
+                for k in range(1, n + 1):
+                    t = c.parameters.get(f"t[{k}]")
+                    if t is not None and exp.start < t < exp.stop:
+                        pts.add(float(t))
+        return sorted(pts)
+
+
+def output_times(experiment):
+    """The master's output times: start, then every ``output_interval`` (or every
+    macro step when it is 0) up to and including stop."""
+    dt = experiment.output_interval if experiment.output_interval > 0 else experiment.step
+    n = int(math.floor((experiment.stop - experiment.start) / dt + 1e-9))
+    return experiment.start + dt * np.arange(n + 1)
+
+
+def simulate_reference(system, t_eval=None, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf,
+                       result=True):
+    """Solve the monolithic ODE of ``system`` over its experiment.
+
+    ``t_eval``: output times (default: the master's, :func:`output_times`);
+    ``atol``: absolute tolerance, scalar or per state (default ``rtol`` times
+    max(1, |x0|) per state: tensions in N, angles in rad, integrators ~0).
+    Returns a :class:`ReferenceResult` (``time``, ``columns`` dict of arrays
+    named ``<component>.<variable>``, ``states``, ``info``).
+    """
+    wall = _time.perf_counter()
+    ref = ReferenceSystem(system)
+    exp = system.experiment
+    t_eval = output_times(exp) if t_eval is None else np.asarray(t_eval, dtype=float)
+    if atol is None:
+        atol = rtol * np.maximum(1.0, np.abs(ref.x0)) if ref.x0.size else rtol
+    t0, t1 = float(exp.start), float(max(exp.stop, t_eval[-1] if t_eval.size else exp.stop))
+    edges = [t0, *[b for b in ref.breakpoints() if t0 < b < t1], t1]
+    x = ref.x0.copy()
+    states = np.empty((t_eval.size, ref.x0.size))
+    nfev = 0
+    if ref.x0.size == 0:
+        states[:] = 0.0
+    else:
+        for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+            last = k == len(edges) - 2
+            mask = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
+            sol = solve_ivp(ref.rhs, (a, b), x, method=method, rtol=rtol, atol=atol,
+                            dense_output=True, max_step=max_step)
+            if not sol.success:
+                raise RuntimeError(f"reference solver failed at t={sol.t[-1]:.6g} s: {sol.message}")
+            nfev += sol.nfev
+            if mask.any():
+                states[mask] = sol.sol(t_eval[mask]).T
+            x = sol.y[:, -1]
+    ys = np.array([ref.outputs(t, s) for t, s in zip(t_eval, states)]).reshape(t_eval.size, len(ref.columns))
+    columns = {name: ys[:, j] for j, name in enumerate(ref.columns)}
+    info = {"method": method, "rtol": rtol, "nfev": nfev, "n_states": int(ref.x0.size),
+            "wall_s": _time.perf_counter() - wall}
+    return ReferenceResult(t_eval, columns, states, ref.state_names, info)
+
+
+class ReferenceResult:
+    """Reference solution: ``time`` (array), ``columns`` {``<component>.<variable>``: array},
+    ``states`` (time x states), ``state_names``, ``info`` (solver statistics)."""
+
+    def __init__(self, time, columns, states, state_names, info):
+        self.time = time
+        self.columns = columns
+        self.states = states
+        self.state_names = state_names
+        self.info = info
+
+    def __getitem__(self, name):
+        if name == "time":
+            return self.time
+        return self.columns[name]
+
+    def __contains__(self, name):
+        return name == "time" or name in self.columns
+
+    def __iter__(self):  # (time, columns) unpacking
+        return iter((self.time, self.columns))
+
+    def names(self):
+        return list(self.columns)
