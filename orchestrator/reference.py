@@ -227,46 +227,83 @@ def output_times(experiment):
     return experiment.start + dt * np.arange(n + 1)
 
 
-def simulate_reference(system, t_eval=None, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf,
-                       result=True):
-    """Solve the monolithic ODE of ``system`` over its experiment.
+def solve_reference(system, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf):
+    """Solve the monolithic ODE of ``system`` over its experiment; returns a
+    :class:`ReferenceSolution` (dense: sample it at any times with ``.sample(t)``).
 
-    ``t_eval``: output times (default: the master's, :func:`output_times`);
     ``atol``: absolute tolerance, scalar or per state (default ``rtol`` times
     max(1, |x0|) per state: tensions in N, angles in rad, integrators ~0).
-    Returns a :class:`ReferenceResult` (``time``, ``columns`` dict of arrays
-    named ``<component>.<variable>``, ``states``, ``info``).
+    The integration restarts at every Profile knot (a kink in an input).
     """
     wall = _time.perf_counter()
     ref = ReferenceSystem(system)
     exp = system.experiment
-    t_eval = output_times(exp) if t_eval is None else np.asarray(t_eval, dtype=float)
     if atol is None:
         atol = rtol * np.maximum(1.0, np.abs(ref.x0)) if ref.x0.size else rtol
-    t0, t1 = float(exp.start), float(max(exp.stop, t_eval[-1] if t_eval.size else exp.stop))
+    t0, t1 = float(exp.start), float(exp.stop)
     edges = [t0, *[b for b in ref.breakpoints() if t0 < b < t1], t1]
+    segments = []
     x = ref.x0.copy()
-    states = np.empty((t_eval.size, ref.x0.size))
     nfev = 0
-    if ref.x0.size == 0:
-        states[:] = 0.0
-    else:
-        for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
-            last = k == len(edges) - 2
-            mask = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
+    if ref.x0.size:
+        for a, b in zip(edges[:-1], edges[1:]):
             sol = solve_ivp(ref.rhs, (a, b), x, method=method, rtol=rtol, atol=atol,
                             dense_output=True, max_step=max_step)
             if not sol.success:
                 raise RuntimeError(f"reference solver failed at t={sol.t[-1]:.6g} s: {sol.message}")
             nfev += sol.nfev
-            if mask.any():
-                states[mask] = sol.sol(t_eval[mask]).T
+            segments.append((a, b, sol.sol))
             x = sol.y[:, -1]
-    ys = np.array([ref.outputs(t, s) for t, s in zip(t_eval, states)]).reshape(t_eval.size, len(ref.columns))
-    columns = {name: ys[:, j] for j, name in enumerate(ref.columns)}
     info = {"method": method, "rtol": rtol, "nfev": nfev, "n_states": int(ref.x0.size),
-            "wall_s": _time.perf_counter() - wall}
-    return ReferenceResult(t_eval, columns, states, ref.state_names, info)
+            "solve_s": _time.perf_counter() - wall}
+    return ReferenceSolution(ref, segments, info)
+
+
+class ReferenceSolution:
+    """Dense solution of a :class:`ReferenceSystem` over [start, stop]."""
+
+    def __init__(self, ref, segments, info):
+        self.ref = ref
+        self.segments = segments
+        self.info = info
+
+    def states(self, t):
+        """States at times ``t`` (array), shape (len(t), n_states)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.zeros((t.size, self.ref.x0.size))
+        if not self.segments:
+            return out
+        lo, hi = self.segments[0][0], self.segments[-1][1]
+        if t.size and (t.min() < lo - 1e-12 or t.max() > hi + 1e-9):
+            raise ValueError(f"times outside the solved interval [{lo:g}, {hi:g}] s")
+        done = np.zeros(t.size, dtype=bool)
+        for k, (a, b, sol) in enumerate(self.segments):
+            last = k == len(self.segments) - 1
+            mask = ~done & (t < b) if not last else ~done
+            if mask.any():
+                out[mask] = sol(np.clip(t[mask], a, b)).T
+                done |= mask
+        return out
+
+    def sample(self, t_eval=None):
+        """:class:`ReferenceResult` at ``t_eval`` (default: the master's output times)."""
+        ref = self.ref
+        t_eval = output_times(ref.system.experiment) if t_eval is None else np.asarray(t_eval, dtype=float)
+        states = self.states(t_eval)
+        ys = np.array([ref.outputs(t, s) for t, s in zip(t_eval, states)]).reshape(t_eval.size, len(ref.columns))
+        columns = {name: ys[:, j] for j, name in enumerate(ref.columns)}
+        return ReferenceResult(t_eval, columns, states, ref.state_names, dict(self.info))
+
+
+def simulate_reference(system, t_eval=None, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf):
+    """Monolithic reference of ``system``: :func:`solve_reference` sampled at ``t_eval``
+    (default: the master's output times, :func:`output_times`). Returns a
+    :class:`ReferenceResult` (``time``, ``columns`` {``<component>.<variable>``: array},
+    ``states``, ``info``)."""
+    wall = _time.perf_counter()
+    result = solve_reference(system, rtol=rtol, atol=atol, method=method, max_step=max_step).sample(t_eval)
+    result.info["wall_s"] = _time.perf_counter() - wall
+    return result
 
 
 class ReferenceResult:

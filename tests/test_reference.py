@@ -1,0 +1,126 @@
+"""Monolithic reference (orchestrator.reference) against hand-derived and analytic solutions."""
+import math
+
+import numpy as np
+import pytest
+
+from orchestrator.reference import (AlgebraicLoop, ReferenceSystem, fmu_classes, output_times,
+                                    simulate_reference, solve_reference)
+from orchestrator.system import Component, Connection, Experiment, System
+from webline.physics.span import steady_state_tension
+
+EA = 2.0e4
+
+
+def span(name, L0, T0, **inputs):
+    return Component(name, "Span", {"EA": EA, "L0": L0, "T0": T0}, inputs)
+
+
+def two_spans(stop=5.0):
+    """s1 fed at 1.0 m/s, leaving at 1.01; s2 from 1.01 to 1.03 m/s, entering tension s1.T."""
+    return System([span("s1", 1.0, 50.0, v_in=1.0, v_out=1.01, T_in=0.0),
+                   span("s2", 2.0, 100.0, v_in=1.01, v_out=1.03)],
+                  [Connection("s1", "T", "s2", "T_in")], Experiment(0.0, stop, 1.0e-3))
+
+
+def test_span_first_order_response_is_analytic():
+    # dT/dt = [v_out (EA - T) - v_in (EA - T_in)]/L: T(t) = T_ss + (T0 - T_ss) exp(-v_out t / L)
+    r = simulate_reference(two_spans())
+    v_in, v_out, L, T0 = 1.0, 1.01, 1.0, 50.0
+    T_ss = steady_state_tension(0.0, v_in, v_out, EA)
+    exact = T_ss + (T0 - T_ss) * np.exp(-v_out * r.time / L)
+    assert np.max(np.abs(r["s1.T"] - exact)) < 1e-6 * T_ss
+
+
+def test_cascade_of_two_spans_is_analytic():
+    # s2: T2' = -a2 T2 + c2 T1(t) + b2 with T1 = T1ss + D1 exp(-a1 t):
+    # T2 = T2ss + A exp(-a1 t) + B exp(-a2 t), A = c2 D1/(a2 - a1), B = T2(0) - T2ss - A.
+    r = simulate_reference(two_spans(stop=8.0))
+    t = r.time
+    a1, T1ss = 1.01 / 1.0, steady_state_tension(0.0, 1.0, 1.01, EA)
+    D1 = 50.0 - T1ss
+    a2, c2 = 1.03 / 2.0, 1.01 / 2.0
+    T2ss = steady_state_tension(T1ss, 1.01, 1.03, EA)
+    A = c2 * D1 / (a2 - a1)
+    B = 100.0 - T2ss - A
+    exact = T2ss + A * np.exp(-a1 * t) + B * np.exp(-a2 * t)
+    assert np.max(np.abs(r["s2.T"] - exact)) < 1e-6 * T2ss
+    # and it settles to the hand-derived steady state
+    assert r["s2.T"][-1] == pytest.approx(T2ss, rel=2e-2)
+
+
+def test_columns_and_times_match_the_master_convention():
+    system = two_spans(stop=0.01)
+    r = simulate_reference(system)
+    assert list(r.columns) == ["s1.T", "s1.L", "s1.dL", "s2.T", "s2.L", "s2.dL"]
+    assert np.allclose(r.time, np.linspace(0.0, 0.01, 11))
+    assert r["s1.L"][0] == 1.0 and r["s2.L"][0] == 2.0
+    system.experiment.output_interval = 0.005
+    assert np.allclose(output_times(system.experiment), [0.0, 0.005, 0.01])
+    time, columns = simulate_reference(system)  # (time, columns) unpacking
+    assert len(time) == 3 and set(columns) == set(r.columns)
+
+
+def test_dense_solution_samples_anywhere():
+    sol = solve_reference(two_spans(stop=2.0))
+    a = sol.sample([0.0, 0.37, 2.0])
+    b = sol.sample(np.linspace(0.0, 2.0, 201))
+    assert a["s1.T"][1] == pytest.approx(np.interp(0.37, b.time, b["s1.T"]), rel=1e-4)
+    with pytest.raises(ValueError):
+        sol.sample([2.5])
+
+
+def test_feed_through_chain_is_ordered():
+    # L of a length_mode-1 span is its input L_ext (feed-through): a.L -> b.L_ext, b.L -> c.L_ext,
+    # listed in reverse so that only a topological order gets c its length 3 m (time constant 3/v).
+    comps = [span("c", 1.0, 0.0, v_in=1.0, v_out=1.02, T_in=0.0),
+             span("b", 1.0, 0.0, v_in=1.0, v_out=1.0, T_in=0.0),
+             span("a", 1.0, 0.0, v_in=1.0, v_out=1.0, T_in=0.0, L_ext=3.0)]
+    for c in comps:
+        c.parameters["length_mode"] = 1
+    comps[0].inputs["L_ext"] = 99.0  # overwritten by the connection
+    conns = [Connection("b", "L", "c", "L_ext"), Connection("a", "L", "b", "L_ext")]
+    system = System(comps, conns, Experiment(0.0, 3.0, 1e-2))
+    fresh = ReferenceSystem(system)  # one evaluation from the start values must already be right
+    y = dict(zip(fresh.columns, fresh.outputs(0.0, fresh.x0)))
+    assert (y["a.L"], y["b.L"], y["c.L"]) == (3.0, 3.0, 3.0)
+    r = simulate_reference(system)
+    assert np.all(r["c.L"] == 3.0)
+    T_ss = steady_state_tension(0.0, 1.0, 1.02, EA)
+    exact = T_ss * (1.0 - np.exp(-1.02 * r.time / 3.0))
+    assert np.max(np.abs(r["c.T"] - exact)) < 1e-6 * T_ss
+
+
+def test_schedule_evaluates_state_outputs_once_per_component():
+    ref = ReferenceSystem(two_spans())
+    # no feed-through output is connected: one outputs() call per component
+    assert sorted(c for c, *_ in ref.schedule) == [0, 1]
+
+
+def test_algebraic_loop_is_reported():
+    a, b = span("a", 1.0, 0.0), span("b", 1.0, 0.0)
+    for c in (a, b):
+        c.parameters["length_mode"] = 1
+    conns = [Connection("a", "L", "b", "L_ext"), Connection("b", "L", "a", "L_ext")]
+    with pytest.raises(AlgebraicLoop, match="a.L"):
+        ReferenceSystem(System([a, b], conns))
+
+
+def test_bad_parameters_name_the_variable():
+    with pytest.raises(ValueError, match="EA"):
+        simulate_reference(System([Component("s", "Span", {"EA": -1.0})], [], Experiment(0, 0.1, 1e-3)))
+    with pytest.raises(KeyError, match="no_such"):
+        ReferenceSystem(System([Component("s", "Span", {"no_such": 1.0})], []))
+    with pytest.raises(KeyError, match="not an output"):
+        ReferenceSystem(System([span("a", 1.0, 0.0), span("b", 1.0, 0.0)],
+                               [Connection("a", "v_in", "b", "T_in")]))
+
+
+def test_every_fmu_script_is_importable_in_process():
+    classes = fmu_classes()
+    assert "Span" in classes
+    for model, cls in classes.items():
+        slave = cls(instance_name=f"probe_{model}")
+        model_obj = slave.make_model()
+        assert tuple(v.name for v in cls.OUTPUTS) == tuple(model_obj.OUTPUTS), model
+        assert set(model_obj.INPUTS) <= {v.name for v in cls.INPUTS}, model
