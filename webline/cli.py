@@ -8,6 +8,8 @@ import sys
 # sub-command -> (module with main(argv) -> int, one-line help)
 COMMANDS = {
     "build-fmus": ("fmus.build", "build every element FMU into one folder"),
+    "sweep": ("orchestrator.sweep_cmd", "run a parameter sweep (grid / Monte Carlo) of a layout"),
+    "plot-sweep": ("orchestrator.sweep_plot", "plot a finished sweep (sweep.csv)"),
 }
 
 
