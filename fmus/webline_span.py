@@ -6,6 +6,16 @@ Thin wrapper of :class:`webline.physics.span.SpanModel`. ``length_mode``:
 step), 1 external ``L_ext``/``dL_ext`` inputs, 2 the paper's {32} at a fixed
 frequency ``f_fixed``.
 """
+import os
+import sys
+
+# pythonfmu imports each FMU's bundled ``webline`` under one process-wide name.
+# A copy imported from another FMU's folder that the host has since deleted
+# (fmpy.simulate_fmu removes its extraction) would break the imports below.
+if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "."):
+    for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
+        del sys.modules[_name]
+
 from webline.fmi_slave import ElementSlave, Var, finite, fourier_vars, positive
 from webline.physics.span import SpanModel
 

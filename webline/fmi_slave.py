@@ -28,6 +28,7 @@ from pythonfmu import Fmi2Slave, Real
 from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variability
 
 from webline import __version__
+from webline.physics.drive import Drive
 from webline.physics.integrate import integrate
 
 # SI base-unit exponents of every unit an FMU may declare (FMI 2.0 BaseUnit).
@@ -51,6 +52,7 @@ UNITS = {
     "1/s": {"s": -1},
     "Hz": {"s": -1},
     "m/(s.N)": {"s": 1, "kg": -1},
+    "N.s": {"kg": 1, "m": 1, "s": -1},
     "N.m/(rad/s)": {"kg": 1, "m": 2, "s": -1, "rad": -1},
 }
 
@@ -89,6 +91,67 @@ def non_negative(value):
 
 def finite(value):
     return None if math.isfinite(value) else f"must be finite (got {value!r})"
+
+
+def choice(*allowed):
+    """A check accepting only the listed values (flags and modes declared as Reals)."""
+    def check(value):
+        if value in allowed:
+            return None
+        return f"must be one of {', '.join(f'{a:g}' for a in allowed)} (got {value!r})"
+    return check
+
+
+def drive_vars():
+    """Parameters of the non-ideal drive (``webline.physics.drive.Drive``); checked by the model
+    only when ``drive.enabled`` is 1."""
+    return (
+        Var("drive.enabled", "1", 0, "Non-ideal drive: 0 ideal (tau acts on the element), 1 motor inertia + "
+            "compliant shaft with backlash (tau acts on the motor)", check=choice(0.0, 1.0)),
+        Var("drive.J_motor", "kg.m2", 0.01, "Motor-side inertia (non-ideal drive)", check=finite),
+        Var("drive.stiffness", "N.m/rad", 1.0e4, "Torsional stiffness of the shaft/coupling (non-ideal drive)",
+            check=finite),
+        Var("drive.damping", "N.m.s/rad", 1.0, "Torsional damping of the shaft/coupling (non-ideal drive)",
+            check=finite),
+        Var("drive.backlash", "rad", 0.0, "Total backlash dead-zone width (non-ideal drive)", check=finite),
+    )
+
+
+def drive_from(slave):
+    """The ``Drive`` of an FMU instance declaring ``drive_vars()``."""
+    return Drive(slave.drive_enabled, slave.drive_J_motor, slave.drive_stiffness, slave.drive_damping,
+                 slave.drive_backlash)
+
+
+def material_roll_parameters():
+    """Parameters shared by the UnwindRoll and RewindRoll FMUs ({3}-{8})."""
+    return (
+        Var("R0", "m", 0.16, "Initial outer radius of the roll", check=positive),
+        Var("R_core", "m", 0.04, "Core radius R_c ({4})", check=positive),
+        Var("thickness", "m", 1.9e-4, "Web thickness t_w ({5})", check=positive),
+        Var("width", "m", 0.15, "Web width w_w ({4})", check=positive),
+        Var("rho", "kg/m3", 400.0, "Web density rho_w ({4})", check=positive),
+        Var("J_core", "kg.m2", 0.02,
+            "Inertia of core, shaft and coupling J_0 ({3}); with the ideal drive it includes the motor",
+            check=non_negative),
+        Var("b", "N.m.s/rad", 0.0, "Viscous friction coefficient", check=non_negative),
+        Var("omega0", "rad/s", 0.0, "Initial angular speed", check=finite),
+        Var("theta0", "rad", 0.0, "Initial angle", check=finite),
+        *drive_vars(),
+    )
+
+
+def material_roll_outputs():
+    """Outputs shared by the UnwindRoll and RewindRoll FMUs (all functions of states)."""
+    return (
+        Var("omega", "rad/s", 0.0, "Angular speed of the roll"),
+        Var("theta", "rad", 0.0, "Angle of the roll"),
+        Var("R", "m", 0.16, "Outer radius of the roll ({5})"),
+        Var("v", "m/s", 0.0, "Web speed at the roll surface, R*omega"),
+        Var("J", "kg.m2", 1.0, "Inertia the motor accelerates: J_0 + J_w ({3},{4}), "
+            "plus drive.J_motor when the drive is enabled (K_p = J K_ref of {24})"),
+        Var("omega_motor", "rad/s", 0.0, "Motor speed (equals omega with the ideal drive)"),
+    )
 
 
 def fourier_vars(prefix, where):
@@ -150,7 +213,14 @@ class ElementSlave(Fmi2Slave):
 
         def get():
             if refresh and self.model is not None and not self.failed:
-                self._refresh_outputs()
+                try:
+                    self._refresh_outputs()
+                except Exception:
+                    # An exception in a getter would reach the host as fmi2Fatal
+                    # "unknown error"; log it, keep the last value, fail the next step.
+                    self.failed = True
+                    self.log(f"{self.instance_name}: computing outputs at t={self.time:.6g} s failed\n"
+                             f"{traceback.format_exc()}", Fmi2Status.error)
             return getattr(self, attr)
 
         def set_(value):
@@ -163,13 +233,18 @@ class ElementSlave(Fmi2Slave):
             description=f"{v.description} [{v.unit}]", getter=get, setter=set_))
 
     def values(self, prefix, n=N_HARMONICS, field="C"):
-        """List of the array parameter ``prefix.field[1..n]``."""
-        return [getattr(self, f"{prefix}_{field}_{j}") for j in range(1, n + 1)]
+        """List of the array parameter ``prefix.field[1..n]`` (``field[1..n]`` when ``prefix`` is empty)."""
+        base = f"{prefix}_{field}" if prefix else field
+        return [getattr(self, f"{base}_{j}") for j in range(1, n + 1)]
 
     def make_model(self):
         raise NotImplementedError
 
     # ---- lifecycle -----------------------------------------------------------------
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        # Outputs computed at initialisation (a profile's value) belong to the start time.
+        self.time = float(start_time or 0.0)
+
     def exit_initialization_mode(self):
         problems = []
         for v in self.parameters():
@@ -196,7 +271,13 @@ class ElementSlave(Fmi2Slave):
         self._input_attrs = [self._attr_of(n) for n in self.model.INPUTS]
         self._output_attrs = [self._attr_of(n) for n in self.model.OUTPUTS]
         self.x = list(self.model.initial_state())
-        self._refresh_outputs()
+        try:
+            self._refresh_outputs()
+        except Exception:
+            self.failed = True
+            self.log(f"{self.instance_name}: computing the initial outputs failed\n"
+                     f"{traceback.format_exc()}", Fmi2Status.error)
+            raise
         return True
 
     def _attr_of(self, name):
@@ -227,7 +308,8 @@ class ElementSlave(Fmi2Slave):
                 def f(t, x):
                     return model.derivatives(t, x, held if held is not None else inputs(s0 + t - t0))
 
-                self.x = integrate(f, current_time, self.x, step_size, self.max_step)
+                h_max = min(self.max_step, model.max_substep(self.x))
+                self.x = integrate(f, current_time, self.x, step_size, h_max)
             self.time = current_time + step_size
             self.since_inputs += step_size
             self._refresh_outputs()

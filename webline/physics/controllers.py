@@ -9,6 +9,9 @@ Both are the same parallel-form PI, u = K (e + w_i * integral e), written in
 states that make anti-windup clean: the integrator stops while the output
 saturates in the direction the error pushes it (conditional integration).
 """
+import math
+
+from webline.physics.element import ElementModel, require_finite, require_positive
 
 
 def speed_gains(J, K_ref, zeta):
@@ -22,9 +25,14 @@ def pi_output(K, w_i, error, integral, u_ff, u_min, u_max):
     return min(max(u, u_min), u_max), u
 
 
-def integral_rate(error, u_unsat, u_min, u_max):
-    """dI/dt = e, except while saturated and the error pushes further into the limit."""
-    if (u_unsat > u_max and error > 0.0) or (u_unsat < u_min and error < 0.0):
+def integral_rate(error, u_unsat, u_min, u_max, direction=1.0):
+    """dI/dt = e, except while saturated and the error pushes further into the limit.
+
+    ``direction``: sign of du/dI (the sign of the gain), so a PI with a
+    negative gain stops integrating at the right limit.
+    """
+    push = error * direction
+    if (u_unsat > u_max and push > 0.0) or (u_unsat < u_min and push < 0.0):
         return 0.0
     return error
 
@@ -32,3 +40,107 @@ def integral_rate(error, u_unsat, u_min, u_max):
 def pi_step_response(K, w_i, e0, t):
     """Analytic open-loop output of K (s + w_i)/s to a constant error e0: K e0 (1 + w_i t)."""
     return K * e0 * (1.0 + w_i * t)
+
+
+def _limit_problems(p, lo_name, lo, hi_name, hi):
+    if not lo < hi:
+        p.append((hi_name, f"must be above {lo_name} = {lo!r} (got {hi!r})"))
+    return p
+
+
+class SpeedPIModel(ElementModel):
+    """Speed loop of {24} with feed-forward, limits and conditional-integration anti-windup.
+
+    omega_ref = (v_ref + v_trim)/R; e = omega_ref - omega; K_p = J K_ref (J an
+    input: a material roll's inertia changes); tau = ff + K_p (e + w_ld I),
+    ff = R (T_in - T_out) + b_ff omega when ``feedforward`` is 1 (the torque
+    that holds the element at constant speed against the web, {7}/{8}/{22}).
+    ``w_ld`` <= 0 selects K_ref/(4 zeta^2). State: I = integral of e (rad).
+    """
+
+    STATES = ("I",)
+    INPUTS = ("v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out")
+    OUTPUTS = ("tau", "omega_ref")
+
+    def __init__(self, K_ref, zeta=1.1, w_ld=0.0, tau_min=-math.inf, tau_max=math.inf, feedforward=0,
+                 b_ff=0.0, I0=0.0):
+        self.K_ref, self.zeta = K_ref, zeta
+        self.w_ld_param = w_ld
+        self.w_ld = w_ld if w_ld > 0.0 else (K_ref / (4.0 * zeta * zeta) if zeta > 0.0 else math.nan)
+        self.tau_min, self.tau_max = tau_min, tau_max
+        self.feedforward_value = feedforward
+        self.feedforward = int(round(feedforward)) == 1 if math.isfinite(feedforward) else False
+        self.b_ff, self.I0 = b_ff, I0
+
+    def problems(self):
+        p = require_positive([], K_ref=self.K_ref, zeta=self.zeta)
+        require_finite(p, w_ld=self.w_ld_param, b_ff=self.b_ff, I0=self.I0)
+        _limit_problems(p, "tau_min", self.tau_min, "tau_max", self.tau_max)
+        if self.feedforward_value not in (0.0, 1.0):
+            p.append(("feedforward", f"must be 0 or 1 (got {self.feedforward_value!r})"))
+        return p
+
+    def initial_state(self):
+        return [self.I0]
+
+    def _law(self, x, u):
+        """(tau, unsaturated tau, error, omega_ref)."""
+        v_ref, v_trim, R, omega, J, T_in, T_out = u
+        if not R > 0.0:
+            raise ValueError(f"input R must be > 0 (got {R!r})")
+        if not J > 0.0:
+            raise ValueError(f"input J must be > 0 (got {J!r})")
+        omega_ref = (v_ref + v_trim) / R
+        e = omega_ref - omega
+        ff = R * (T_in - T_out) + self.b_ff * omega if self.feedforward else 0.0
+        tau, unsat = pi_output(J * self.K_ref, self.w_ld, e, x[0], ff, self.tau_min, self.tau_max)
+        return tau, unsat, e, omega_ref
+
+    def derivatives(self, t, x, u):
+        tau, unsat, e, _ = self._law(x, u)
+        return [integral_rate(e, unsat, self.tau_min, self.tau_max)]
+
+    def outputs(self, t, x, u):
+        tau, _, _, omega_ref = self._law(x, u)
+        return [tau, omega_ref]
+
+
+class TensionPIModel(ElementModel):
+    """Tension loop of {25}: v_trim = sign K (e + w_i I), e = T_ref - T_meas, saturated to
+    [trim_min, trim_max] with conditional-integration anti-windup. State I = integral of e (N.s).
+
+    ``sign`` -1 for a loop at the upstream end of its tension zone (an unwind:
+    too little tension must slow it), +1 at the downstream end (a rewind).
+    """
+
+    STATES = ("I",)
+    INPUTS = ("T_ref", "T_meas")
+    OUTPUTS = ("v_trim",)
+
+    def __init__(self, K, w_i=10.0, sign=1.0, trim_min=-math.inf, trim_max=math.inf, I0=0.0):
+        self.K, self.w_i, self.sign = K, w_i, sign
+        self.trim_min, self.trim_max, self.I0 = trim_min, trim_max, I0
+
+    def problems(self):
+        p = require_positive([], K=self.K)
+        if not (self.w_i >= 0.0 and math.isfinite(self.w_i)):
+            p.append(("w_i", f"must be >= 0 (got {self.w_i!r})"))
+        if self.sign not in (1.0, -1.0):
+            p.append(("sign", f"must be +1 or -1 (got {self.sign!r})"))
+        require_finite(p, I0=self.I0)
+        return _limit_problems(p, "trim_min", self.trim_min, "trim_max", self.trim_max)
+
+    def initial_state(self):
+        return [self.I0]
+
+    def _law(self, x, u):
+        e = u[0] - u[1]
+        trim, unsat = pi_output(self.sign * self.K, self.w_i, e, x[0], 0.0, self.trim_min, self.trim_max)
+        return trim, unsat, e
+
+    def derivatives(self, t, x, u):
+        _, unsat, e = self._law(x, u)
+        return [integral_rate(e, unsat, self.trim_min, self.trim_max, direction=self.sign)]
+
+    def outputs(self, t, x, u):
+        return [self._law(x, u)[0]]

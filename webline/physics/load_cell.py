@@ -4,13 +4,24 @@ A load cell measures the resultant web force along its axis. Calibrated with
 equal tensions, it reports a weighted mean of the entering and leaving
 tensions: weights are the projections of each web direction on the measuring
 axis (wrap geometry). With equal angles this is the plain mean.
+
+Measurement noise is a deterministic function of (seed, time): the same run
+gives the same noise whichever master steps it, and a rerun reproduces it.
 """
 import math
+
+from webline.physics.element import ElementModel, require_finite, require_non_negative
+
+# Time grid of the noise (s): masters that disagree on a communication time by
+# float rounding (k*h vs a running sum, or libcosim's integer nanoseconds)
+# still draw the same sample.
+NOISE_TIME_RESOLUTION = 1.0e-6
+_MASK64 = (1 << 64) - 1
 
 
 def wrap_weights(angle_in, angle_out):
     """Weights of the entering/leaving tension for web directions at ``angle_*`` (rad)
-    from the plane normal to the measuring axis (0 = force fully along the axis)."""
+    from the measuring axis (0 = the web pulls fully along the axis)."""
     a, b = math.cos(angle_in), math.cos(angle_out)
     s = a + b
     if s <= 0.0:
@@ -26,3 +37,75 @@ def measured_tension(T_in, T_out, w_in, w_out):
 def first_order_filter_rate(y, u, tau):
     """dy/dt of a first-order lag y/u = 1/(tau s + 1); tau = 0 passes u through."""
     return (u - y) / tau
+
+
+def _splitmix64(z):
+    """One SplitMix64 output for input ``z`` (a well-mixed 64-bit hash; Steele et al. 2014)."""
+    z = (z + 0x9E3779B97F4A7C15) & _MASK64
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return z ^ (z >> 31)
+
+
+def standard_normal(seed, t, resolution=NOISE_TIME_RESOLUTION):
+    """A N(0, 1) sample that depends only on (integer ``seed``, time ``t`` on a ``resolution`` grid).
+
+    Box-Muller on two uniforms hashed from (seed, round(t/resolution)):
+    independent across grid points and seeds, no generator state to carry.
+    """
+    k = int(round(t / resolution))
+    a = _splitmix64(_splitmix64(int(seed) & _MASK64) ^ (k & _MASK64))
+    b = _splitmix64(a)
+    u1 = ((a >> 11) + 1) * 2.0 ** -53  # (0, 1]: log stays finite
+    u2 = (b >> 11) * 2.0 ** -53
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+class LoadCellModel(ElementModel):
+    """Load-cell reading T = filter(w_in T_in + w_out T_out) + noise.
+
+    ``tau_filter`` > 0: first-order lag with state T (starts at ``T0``);
+    0: no filter and no state, the reading follows the inputs directly.
+    ``noise_std`` (N): Gaussian measurement noise added to the reading,
+    ``standard_normal(seed, t)``; 0 turns it off.
+    """
+
+    INPUTS = ("T_in", "T_out")
+    OUTPUTS = ("T",)
+
+    def __init__(self, angle_in=0.0, angle_out=0.0, tau_filter=0.0, noise_std=0.0, seed=0, T0=0.0):
+        self.angle_in, self.angle_out = angle_in, angle_out
+        self.tau_filter, self.noise_std, self.seed, self.T0 = tau_filter, noise_std, seed, T0
+        self.STATES = ("T",) if tau_filter > 0.0 else ()
+        try:
+            self.w_in, self.w_out = wrap_weights(angle_in, angle_out)
+        except (ValueError, OverflowError):
+            self.w_in = self.w_out = math.nan
+
+    def problems(self):
+        p = require_finite([], angle_in=self.angle_in, angle_out=self.angle_out, seed=self.seed, T0=self.T0)
+        require_non_negative(p, tau_filter=self.tau_filter, noise_std=self.noise_std)
+        if not p and math.isnan(self.w_in):
+            p.append(("angle_in/angle_out",
+                      f"wrap angles {self.angle_in!r}, {self.angle_out!r} rad give no force along the load-cell axis"))
+        if math.isfinite(self.seed) and self.seed != round(self.seed):
+            p.append(("seed", f"must be an integer (got {self.seed!r})"))
+        return p
+
+    def initial_state(self):
+        return [self.T0] if self.STATES else []
+
+    def derivatives(self, t, x, u):
+        if not self.STATES:
+            return []
+        return [first_order_filter_rate(x[0], measured_tension(u[0], u[1], self.w_in, self.w_out),
+                                        self.tau_filter)]
+
+    def noise(self, t):
+        if self.noise_std == 0.0:
+            return 0.0
+        return self.noise_std * standard_normal(int(self.seed), t)
+
+    def outputs(self, t, x, u):
+        y = x[0] if self.STATES else measured_tension(u[0], u[1], self.w_in, self.w_out)
+        return [y + self.noise(t)]
