@@ -1,0 +1,687 @@
+"""Co-simulation master: runs a :class:`~orchestrator.system.System` of FMI 2.0 co-simulation FMUs.
+
+The master knows FMI, not physics. One screen per concept, as in libcosim:
+
+* **loading** (:func:`load_model`): each FMU model is extracted once per process
+  and its modelDescription read (variables, units, output dependencies);
+* **slaves** (:class:`Slave`): one instance per component. Life-cycle calls
+  (instantiate, set start values, initialise) go through fmpy's ``FMU2Slave``;
+  the per-step calls go through raw ctypes functions with value-reference and
+  value arrays allocated once, one ``fmi2SetReal`` for all connected inputs
+  and one ``fmi2GetReal`` for all outputs of an instance;
+* **coupling plan** (:func:`plan_coupling`): every output lives at a fixed
+  index of one float vector ``y`` and every connected input at a fixed index of
+  ``u``; a connection is the pair of indices, so applying all connections is one
+  gather ``u[dst] = y[src]``. Outputs that depend directly on inputs
+  (feed-through: ``SpeedPI.tau``, ``TensionPI.v_trim``, ``LoadCell.T``,
+  ``Span.L``/``dL``) are resolved after every step in topological order of the
+  dependencies declared in the modelDescription; a cycle among them is a real
+  algebraic loop and is reported before anything runs;
+* **algorithms** (:func:`jacobi_step`, :func:`gauss_seidel_step`): fixed macro step;
+* **observer** (:class:`orchestrator.results.Recorder`): one row of ``y`` per
+  output interval into a preallocated array.
+
+Failures: a call that returns fmi2Discard, fmi2Error or fmi2Fatal stops the run.
+The :class:`~orchestrator.results.Result` keeps every row recorded so far, with
+``status = "failed"`` and a message naming the component, its element, the
+FMI function, the time and the last messages the FMU logged. An instance that
+returned fmi2Error or fmi2Fatal is never called again, not even to free it
+(pythonfmu instances segfault in terminate/free after a fatal error).
+
+FMU log messages are taken raw from each instance's logger callback, without
+fmpy's printf proxy: pythonfmu passes its message as the format string, and a
+``%`` in it (a traceback, "100 %") crashed the proxy in a test.
+
+Structural problems (unknown model or variable, input fed twice, algebraic
+loop) raise :class:`SetupError` before any FMU is instantiated.
+"""
+import atexit
+import ctypes
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time as _time
+from collections import deque
+from ctypes import POINTER, c_double, c_int, c_size_t, c_uint, c_void_p, cast
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.results import Recorder, Result
+
+ALGORITHMS = ("jacobi", "gauss-seidel")
+STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+LOG_KEEP = 20  # log messages kept per instance
+LOG_SHOW = 6  # of which shown in a failure message
+CHECK_EVERY = 256  # macro steps between progress updates and finiteness checks
+
+
+class SetupError(ValueError):
+    """The System cannot be run as given (nothing was instantiated)."""
+
+
+class RunFailure(Exception):
+    """The run stopped; the message says where and why."""
+
+
+class FmiFailure(RunFailure):
+    """An FMI call returned Discard, Error or Fatal (``status`` None: instantiation failed)."""
+
+    def __init__(self, slave, function, status, t):
+        self.slave, self.function, self.status, self.t = slave, function, status, t
+        super().__init__(describe_failure(slave, function, status, t))
+
+
+# ---- loading ------------------------------------------------------------------------
+class FmuModel:
+    """One FMU file, extracted once: modelDescription facts the master needs."""
+
+    def __init__(self, path):
+        from fmpy import extract, read_model_description
+
+        self.path = Path(path)
+        self.md = read_model_description(str(self.path))
+        if self.md.fmiVersion != "2.0" or self.md.coSimulation is None:
+            raise SetupError(f"{self.path}: not an FMI 2.0 co-simulation FMU")
+        self.name = self.md.modelName
+        self.identifier = self.md.coSimulation.modelIdentifier
+        self.unzipdir = extract(str(self.path), unzipdir=tempfile.mkdtemp(prefix=f"webline_{self.identifier}_"))
+        _EXTRACTED.append(self.unzipdir)
+        self.library = os.path.join(self.unzipdir, "binaries", _platform(),
+                                    self.identifier + (".dll" if sys.platform == "win32" else ".so"))
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self.inputs = [v.name for v in self.md.modelVariables if v.causality == "input"]
+        # output -> tuple of input names it depends on directly (None: unknown = all inputs)
+        self.outputs = {}
+        for unknown in self.md.outputs:
+            deps = unknown.dependencies
+            self.outputs[unknown.variable.name] = (tuple(self.inputs) if deps is None
+                                                   else tuple(d.name for d in deps if d.causality == "input"))
+        self._dll = None
+
+    def dll(self):
+        """The shared library with the raw functions the loop calls (restype int, no argtypes)."""
+        if self._dll is None:
+            self._dll = ctypes.CDLL(self.library)  # same handle fmpy's FMU2Slave loads
+            for name in ("fmi2SetReal", "fmi2GetReal", "fmi2DoStep"):
+                getattr(self._dll, name).restype = c_int
+        return self._dll
+
+    def unit(self, name):
+        v = self.variables[name]
+        return v.unit or (v.declaredType.unit if v.declaredType is not None else "") or ""
+
+    def description(self, name):
+        return self.variables[name].description or ""
+
+
+_MODELS = {}
+_EXTRACTED = []
+
+
+def _platform():
+    from fmpy import platform
+    return platform
+
+
+@atexit.register
+def _remove_extracted():
+    for d in _EXTRACTED:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def load_model(path):
+    """The :class:`FmuModel` of an FMU file, extracted once per process (and again if the file changed)."""
+    path = Path(path).resolve()
+    key = (str(path), path.stat().st_mtime_ns)
+    if key not in _MODELS:
+        _MODELS[key] = FmuModel(path)
+    return _MODELS[key]
+
+
+# ---- slaves -------------------------------------------------------------------------
+class Slave:
+    """One FMU instance: fmpy for the life cycle, raw ctypes calls in the loop."""
+
+    def __init__(self, component, model, index):
+        self.component = component
+        self.name = component.name
+        self.element = component.element or component.name
+        self.model = model
+        self.index = index
+        self.log = deque(maxlen=LOG_KEEP)
+        self.warnings = 0
+        self.fmu = None
+        self.state = "new"  # new, instantiated, initialized, failed (never call again), freed
+        # filled by plan_coupling
+        self.outputs = []  # output names in y order: state outputs, then feed-through by level
+        self.y0 = 0  # index of the first output in y
+        self.n_state = 0  # leading outputs that feed connections and depend on no connected input
+        self.n_rest = 0  # then outputs that depend on no connected input and only get recorded
+        self.inputs = []  # connected input names, in u order
+        self.u0 = 0
+
+    def label(self):
+        extra = f", element {self.element!r}" if self.element != self.name else ""
+        return f"component {self.name!r} ({self.model.name}{extra})"
+
+    def _logger(self, env, instance, status, category, message):
+        text = message.decode("utf-8", "replace") if message else ""
+        self.log.append((status, text))
+        if status >= 1:
+            self.warnings += 1
+
+    def instantiate(self):
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+
+        md = self.model.md
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(self._logger)
+        cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        self.callbacks = cb  # the C side keeps a pointer: keep it alive as long as the instance
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.model.unzipdir,
+                             modelIdentifier=self.model.identifier, instanceName=self.name)
+        self.fmu.instantiate(callbacks=cb, loggingOn=True)
+        self.c = c_void_p(self.fmu.component)
+        self.state = "instantiated"
+
+    def set_start_values(self):
+        """Parameters and input start values of the component (fmpy calls, once)."""
+        for values in (self.component.parameters, self.component.inputs):
+            for name, value in values.items():
+                v = self.model.variables[name]
+                vr = [v.valueReference]
+                if v.type == "Real":
+                    self.fmu.setReal(vr, [float(value)])
+                elif v.type in ("Integer", "Enumeration"):
+                    self.fmu.setInteger(vr, [int(value)])
+                elif v.type == "Boolean":
+                    self.fmu.setBoolean(vr, [bool(value)])
+                else:
+                    self.fmu.setString(vr, [str(value)])
+
+    def bind(self, y, u):
+        """Raw calls bound to this instance's slices of ``y`` and ``u`` (after plan_coupling)."""
+        dll = self.model.dll()
+        vr = self.model.variables
+        dptr = POINTER(c_double)
+        out_vrs = (c_uint * len(self.outputs))(*(vr[n].valueReference for n in self.outputs))
+        self._out_vrs = out_vrs
+
+        def get_range(a, b):
+            p = cast(y.ctypes.data + 8 * (self.y0 + a), dptr)
+            v = cast(ctypes.addressof(out_vrs) + 4 * a, POINTER(c_uint))
+            return partial(dll.fmi2GetReal, self.c, v, c_size_t(b - a), p)
+
+        self.get_state = get_range(0, self.n_state) if self.n_state else None
+        self.get_rest = get_range(self.n_state, self.n_state + self.n_rest) if self.n_rest else None
+        self.get_range = get_range
+        in_vrs = (c_uint * len(self.inputs))(*(vr[n].valueReference for n in self.inputs))
+        self._in_vrs = in_vrs
+        self.set_inputs = (partial(dll.fmi2SetReal, self.c, in_vrs, c_size_t(len(self.inputs)),
+                                   cast(u.ctypes.data + 8 * self.u0, dptr)) if self.inputs else None)
+        self.do_step = partial(dll.fmi2DoStep, self.c)
+
+    def close(self):
+        """Terminate and free, unless the instance failed (then it is left alone)."""
+        if self.state == "initialized":
+            _raw_quiet(self.model, "fmi2Terminate", self.c)
+        if self.state in ("initialized", "instantiated"):
+            _raw_quiet(self.model, "fmi2FreeInstance", self.c)
+            self.state = "freed"
+        elif self.state == "failed":
+            _ABANDONED.append(self)  # keep callbacks alive: the instance is never freed
+
+
+_ABANDONED = []
+
+
+def _raw_quiet(model, function, *args):
+    try:
+        getattr(model.dll(), function)(*args)
+    except Exception:  # cleanup must not hide the run's own outcome
+        pass
+
+
+def describe_failure(slave, function, status, t):
+    """Message for a failed FMI call, with the last messages the instance logged."""
+    if status is None:
+        text = f"{slave.label()}: {function} failed at t = {t:.6g} s"
+    else:
+        label = f"fmi2{STATUS[status]}" if 0 <= status < len(STATUS) else f"illegal status {status}"
+        text = f"{slave.label()}: {function} returned {label} at t = {t:.6g} s"
+    logged = list(slave.log)[-LOG_SHOW:]
+    if logged:
+        text += "\nFMU log (last messages):"
+        for st, msg in logged:
+            lvl = STATUS[st] if 0 <= st < len(STATUS) else str(st)
+            msg = msg if len(msg) <= 3000 else msg[:3000] + " [...]"
+            text += f"\n  [{lvl}] " + msg.replace("\n", "\n    ")
+    else:
+        text += " (the FMU logged nothing)"
+    return text
+
+
+# ---- coupling plan ------------------------------------------------------------------
+class Group:
+    """Feed-through outputs of one slave resolved together: gather and set the
+    slave's connected inputs, then read outputs ``y[a:b]`` of that slave."""
+
+    __slots__ = ("slave", "level", "a", "b", "get", "deps")
+
+    def __init__(self, slave, level, a, b):
+        self.slave, self.level, self.a, self.b = slave, level, a, b
+
+
+class Plan:
+    """Where every value lives and in which order feed-through is resolved."""
+
+    def __init__(self, slaves, y, u, dst, src, groups, sinks, chains, columns, units, descriptions):
+        self.slaves, self.y, self.u, self.dst, self.src = slaves, y, u, dst, src
+        self.groups, self.sinks, self.chains = groups, sinks, chains
+        self.columns, self.units, self.descriptions = columns, units, descriptions
+
+
+def check_system(system, models):
+    """Structural problems of ``system`` against the FMUs (raises SetupError listing all)."""
+    problems = list(system.check())
+    by_name = {c.name: c for c in system.components}
+    for c in system.components:
+        if c.model not in models:
+            problems.append(f"component {c.name!r}: no FMU for model {c.model!r} "
+                            f"(have: {', '.join(sorted(models)) or 'none'})")
+            continue
+        m = models[c.model]
+        for kind, values, causality in (("parameter", c.parameters, ("parameter",)),
+                                        ("input", c.inputs, ("input",))):
+            for name in values:
+                v = m.variables.get(name)
+                if v is None:
+                    problems.append(f"component {c.name!r}: model {c.model} has no variable {name!r}")
+                elif v.causality not in causality:
+                    problems.append(f"component {c.name!r}: {name!r} is a {v.causality}, "
+                                    f"not a{'n' if kind == 'input' else ''} {kind}")
+    for k in system.connections:
+        for comp, var, want in ((k.src, k.src_var, "output"), (k.dst, k.dst_var, "input")):
+            c = by_name.get(comp)
+            if c is None or c.model not in models:
+                continue
+            v = models[c.model].variables.get(var)
+            if v is None:
+                problems.append(f"connection {k.src}.{k.src_var} -> {k.dst}.{k.dst_var}: "
+                                f"model {c.model} has no variable {var!r}")
+            elif v.causality != want or v.type != "Real":
+                problems.append(f"connection {k.src}.{k.src_var} -> {k.dst}.{k.dst_var}: "
+                                f"{comp}.{var} is a {v.type} {v.causality}, expected a Real {want}")
+    e = system.experiment
+    if e.algorithm not in ALGORITHMS:
+        problems.append(f"experiment.algorithm {e.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
+    if not (e.step > 0 and math.isfinite(e.step)):
+        problems.append(f"experiment.step must be > 0 (got {e.step!r})")
+    if not (e.stop > e.start):
+        problems.append(f"experiment.stop ({e.stop!r}) must be after start ({e.start!r})")
+    if problems:
+        raise SetupError("system cannot be run:\n  " + "\n  ".join(problems))
+
+
+def plan_coupling(slaves, connections):
+    """Lay out ``y``/``u``, classify outputs, order feed-through, detect algebraic loops."""
+    feeds = {}  # (dst, input) -> (src, output)
+    for k in connections:
+        feeds[(k.dst, k.dst_var)] = (k.src, k.src_var)
+    # connected inputs per slave, in modelDescription order
+    for s in slaves:
+        s.inputs = [n for n in s.model.inputs if (s.name, n) in feeds]
+
+    # feed-through outputs: depend on at least one connected input
+    ft = {}
+    for s in slaves:
+        for out, deps in s.model.outputs.items():
+            d = [i for i in deps if (s.name, i) in feeds]
+            if d:
+                ft[(s.name, out)] = d
+
+    # levels by depth-first search; a cycle is an algebraic loop
+    level, on_path = {}, []
+
+    def visit(node):
+        if node in level:
+            return level[node]
+        if node in on_path:
+            loop = on_path[on_path.index(node):] + [node]
+            raise SetupError("algebraic loop through feed-through outputs: "
+                             + " -> ".join(f"{a}.{b}" for a, b in loop))
+        if node not in ft:
+            return 0
+        on_path.append(node)
+        lv = 1 + max(visit(feeds[(node[0], i)]) for i in ft[node])
+        on_path.pop()
+        level[node] = lv
+        return lv
+
+    for node in ft:
+        visit(node)
+
+    # y layout per slave: coupled state outputs | other state outputs | feed-through
+    # groups, coupled ones by level, then the sinks (feed nothing: read only to record)
+    coupled = set(feeds.values())
+    columns, units, descriptions = [], {}, {}
+    n_y = 0
+    groups, sinks = [], []
+    for s in slaves:
+        outs = list(s.model.outputs)
+        state = [o for o in outs if (s.name, o) not in ft]
+        s.n_state = sum((s.name, o) in coupled for o in state)
+        s.n_rest = len(state) - s.n_state
+        key = {o: ((s.name, o) not in coupled, level.get((s.name, o), 0)) for o in outs}
+        s.outputs = sorted(state, key=lambda o: key[o][0]) + sorted(
+            (o for o in outs if (s.name, o) in ft), key=lambda o: key[o])
+        s.y0 = n_y
+        n_y += len(s.outputs)
+        a = len(state)
+        while a < len(s.outputs):
+            b = a
+            while b < len(s.outputs) and key[s.outputs[b]] == key[s.outputs[a]]:
+                b += 1
+            g = Group(s, key[s.outputs[a]][1], a, b)
+            g.deps = sorted({i for o in s.outputs[a:b] for i in ft[(s.name, o)]})
+            (sinks if key[s.outputs[a]][0] else groups).append(g)
+            a = b
+        for o in s.outputs:
+            col = f"{s.name}.{o}"
+            columns.append(col)
+            units[col] = s.model.unit(o)
+            descriptions[col] = s.model.description(o)
+    groups.sort(key=lambda g: g.level)  # stable: system order within a level
+
+    # u layout
+    n_u = 0
+    for s in slaves:
+        s.u0 = n_u
+        n_u += len(s.inputs)
+    y = np.zeros(n_y)
+    u = np.zeros(n_u)
+    for s in slaves:  # u starts at the FMU's start values (overwritten before any use)
+        for i, n in enumerate(s.inputs):
+            start = s.component.inputs.get(n, s.model.variables[n].start)
+            u[s.u0 + i] = float(start) if start is not None else 0.0
+    y_index = {(s.name, o): s.y0 + i for s in slaves for i, o in enumerate(s.outputs)}
+    dst, src = [], []
+    per_slave = {s.name: ([], []) for s in slaves}
+    for s in slaves:
+        for i, n in enumerate(s.inputs):
+            j = y_index[feeds[(s.name, n)]]
+            dst.append(s.u0 + i)
+            src.append(j)
+            per_slave[s.name][0].append(s.u0 + i)
+            per_slave[s.name][1].append(j)
+    for s in slaves:
+        s.dst = np.array(per_slave[s.name][0], dtype=np.intp)
+        s.src = np.array(per_slave[s.name][1], dtype=np.intp)
+
+    # for Gauss-Seidel: the feed-through groups (in order) that slave k's inputs need
+    group_of = {}
+    for g in groups:
+        for o in g.slave.outputs[g.a:g.b]:
+            group_of[(g.slave.name, o)] = g
+    chains = {}
+    for s in slaves:
+        need, stack = set(), [feeds[(s.name, n)] for n in s.inputs]
+        while stack:
+            node = stack.pop()
+            g = group_of.get(node)
+            if g is None or id(g) in need:
+                continue
+            need.add(id(g))
+            stack.extend(feeds[(g.slave.name, n)] for n in g.deps)
+        chains[s.name] = [g for g in groups if id(g) in need]
+    return Plan(slaves, y, u, np.array(dst, dtype=np.intp), np.array(src, dtype=np.intp),
+                groups, sinks, chains, columns, units, descriptions)
+
+
+# ---- algorithms ---------------------------------------------------------------------
+def _fail(slave, function, status, t):
+    if status == 1:  # warning: keep going, the message is in the slave's log
+        return
+    if status >= 3 or status < 0:
+        slave.state = "failed"
+    raise FmiFailure(slave, function, status, t)
+
+
+def resolve(groups, y, u, t):
+    """Feed-through outputs in topological order: set the slave's inputs, read the group."""
+    for g in groups:
+        s = g.slave
+        u[s.dst] = y[s.src]
+        st = s.set_inputs()
+        if st:
+            _fail(s, "fmi2SetReal", st, t)
+        st = g.get()
+        if st:
+            _fail(s, "fmi2GetReal", st, t)
+
+
+def jacobi_step(plan, t, h):
+    """All slaves step from the same input values at ``t``; then outputs at ``t + h``."""
+    y, u = plan.y, plan.u
+    u[plan.dst] = y[plan.src]
+    ct, ch, one = c_double(t), c_double(h), c_int(1)
+    for s in plan.slaves:
+        if s.set_inputs is not None:
+            st = s.set_inputs()
+            if st:
+                _fail(s, "fmi2SetReal", st, t)
+    for s in plan.slaves:
+        st = s.do_step(ct, ch, one)
+        if st:
+            _fail(s, "fmi2DoStep", st, t)
+    t1 = t + h
+    for s in plan.slaves:
+        if s.get_state is not None:
+            st = s.get_state()
+            if st:
+                _fail(s, "fmi2GetReal", st, t1)
+    resolve(plan.groups, y, u, t1)
+
+
+def gauss_seidel_step(plan, t, h):
+    """Slaves step one after the other (system order), each from the latest values
+    of the slaves stepped before it (feed-through chains re-resolved first)."""
+    y, u, chains = plan.y, plan.u, plan.chains
+    ct, ch, one = c_double(t), c_double(h), c_int(1)
+    t1 = t + h
+    for s in plan.slaves:
+        chain = chains[s.name]
+        if chain:
+            resolve(chain, y, u, t)
+        if s.set_inputs is not None:
+            u[s.dst] = y[s.src]
+            st = s.set_inputs()
+            if st:
+                _fail(s, "fmi2SetReal", st, t)
+        st = s.do_step(ct, ch, one)
+        if st:
+            _fail(s, "fmi2DoStep", st, t)
+        if s.get_state is not None:
+            st = s.get_state()
+            if st:
+                _fail(s, "fmi2GetReal", st, t1)
+    resolve(plan.groups, y, u, t1)
+
+
+def complete(plan, t):
+    """Read the outputs that only get recorded (nothing depends on them) at ``t``."""
+    for s in plan.slaves:
+        if s.get_rest is not None:
+            st = s.get_rest()
+            if st:
+                _fail(s, "fmi2GetReal", st, t)
+    resolve(plan.sinks, plan.y, plan.u, t)
+
+
+STEP = {"jacobi": jacobi_step, "gauss-seidel": gauss_seidel_step}
+
+
+# ---- the run ------------------------------------------------------------------------
+def _initialize(slaves, start, stop):
+    from fmpy.fmi1 import FMICallException
+
+    for s in slaves:
+        try:
+            s.instantiate()
+        except Exception as exc:
+            s.log.append((4, f"{type(exc).__name__}: {exc}"))
+            raise FmiFailure(s, "fmi2Instantiate", None, start) from exc
+    for s in slaves:
+        function = "fmi2SetupExperiment"
+        try:
+            s.fmu.setupExperiment(startTime=start, stopTime=stop)
+            function = "fmi2SetReal (start values)"
+            s.set_start_values()
+            function = "fmi2EnterInitializationMode"
+            s.fmu.enterInitializationMode()
+            function = "fmi2ExitInitializationMode"
+            s.fmu.exitInitializationMode()
+        except FMICallException as exc:
+            if exc.status >= 3:
+                s.state = "failed"
+            raise FmiFailure(s, exc.function, exc.status, start) from exc
+        s.state = "initialized"
+
+
+def _first_non_finite(rec, first, columns, slaves):
+    """Message naming the first non-finite recorded value from row ``first`` on, or None."""
+    data = rec.data[first:rec.n]
+    bad = np.argwhere(~np.isfinite(data))
+    if not len(bad):
+        return None
+    r, c = bad[0]
+    col = columns[c]
+    s = next(s for s in slaves if col.startswith(s.name + "."))
+    return (f"{s.label()}: output {col} became {data[r, c]} at t = {rec.time[first + r]:.6g} s "
+            "(diverged)")
+
+
+def simulate(system, fmu_paths=None, progress=True):
+    """Run ``system`` and return a :class:`~orchestrator.results.Result`.
+
+    ``fmu_paths``: {model name: .fmu path}; default: ``fmus.build.build_all()``
+    (builds the FMUs if they are out of date). Raises :class:`SetupError` for a
+    system that cannot run; an FMU failure gives a Result with
+    ``status == "failed"`` and the rows recorded so far.
+    """
+    if fmu_paths is None:
+        from fmus.build import build_all
+        fmu_paths = build_all(log=lambda m: print(m, file=sys.stderr))
+    used = {c.model for c in system.components}
+    models = {}
+    for name, path in fmu_paths.items():
+        if name in used:
+            if not Path(path).exists():
+                raise SetupError(f"FMU of model {name!r} not found: {path}")
+            models[name] = load_model(path)
+    check_system(system, models)
+    slaves = [Slave(c, models[c.model], i) for i, c in enumerate(system.components)]
+    plan = plan_coupling(slaves, system.connections)
+
+    e = system.experiment
+    h, t0 = float(e.step), float(e.start)
+    n_steps = max(1, math.ceil((e.stop - e.start) / h - 1e-9))
+    every = max(1, round(e.output_interval / h)) if e.output_interval > 0 else 1
+    recorder = Recorder(plan.columns, plan.units, plan.descriptions, n_steps // every + 1)
+    meta = {
+        "layout": str(system.meta.get("layout", system.meta.get("layout_path", ""))),
+        "start": t0, "stop": t0 + n_steps * h, "step": h, "algorithm": e.algorithm,
+        "output_interval": every * h, "n_components": len(slaves),
+        "components": {s.name: {"model": s.model.name, "element": s.component.element,
+                                "kind": s.component.kind} for s in slaves},
+        "system": _system_dict(system),
+        "system_meta": system.meta,
+    }
+    step = STEP[e.algorithm]
+    status, message, k = "ok", "", 0
+    t_setup = _time.perf_counter()
+    t_loop, wall, setup_time = 0.0, 0.0, 0.0
+    bar = None
+    try:
+        try:
+            _initialize(slaves, t0, t0 + n_steps * h)
+            for s in slaves:
+                s.bind(plan.y, plan.u)
+            for g in (*plan.groups, *plan.sinks):
+                g.get = g.slave.get_range(g.a, g.b)
+            setup_time = _time.perf_counter() - t_setup
+            t_loop = _time.perf_counter()
+            y = plan.y
+            for s in slaves:
+                if s.get_state is not None:
+                    st = s.get_state()
+                    if st:
+                        _fail(s, "fmi2GetReal", st, t0)
+            resolve(plan.groups, y, plan.u, t0)
+            complete(plan, t0)
+            record = recorder.record
+            record(t0, y)
+            bar = _progress_bar(n_steps, progress)
+            checked = 0
+            while k < n_steps:
+                stop_k = min(n_steps, k + CHECK_EVERY)
+                while k < stop_k:
+                    step(plan, t0 + k * h, h)
+                    k += 1
+                    if k % every == 0:
+                        complete(plan, t0 + k * h)
+                        record(t0 + k * h, y)
+                bad = _first_non_finite(recorder, checked, plan.columns, slaves)
+                if bad:
+                    raise RunFailure(bad)
+                checked = recorder.n
+                if bar is not None:
+                    bar.update(stop_k - bar.n)
+            wall = _time.perf_counter() - t_loop
+        except RunFailure as f:
+            status, message = "failed", str(f)
+            wall = _time.perf_counter() - t_loop if t_loop else 0.0
+    finally:
+        if bar is not None:
+            bar.close()
+        for s in slaves:
+            s.close()
+    if not t_loop:
+        setup_time = _time.perf_counter() - t_setup
+    simulated = k * h
+    meta.update(status=status, message=message, wall_time=wall, setup_time=setup_time,
+                steps_done=k, simulated_time=simulated,
+                real_time_factor=(simulated / wall) if wall > 0 else float("nan"),
+                fmu_warnings=sum(s.warnings for s in slaves))
+    return recorder.result(meta)
+
+
+def _progress_bar(total, wanted):
+    if not wanted or not sys.stderr.isatty():
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, unit="step", delay=2.0, file=sys.stderr, leave=False,
+                dynamic_ncols=True, mininterval=0.5)
+
+
+def _system_dict(system):
+    """The System as plain data (stored with the results)."""
+    e = system.experiment
+    return {
+        "components": [{"name": c.name, "model": c.model, "element": c.element, "kind": c.kind,
+                        "parameters": dict(c.parameters), "inputs": dict(c.inputs)}
+                       for c in system.components],
+        "connections": [[k.src, k.src_var, k.dst, k.dst_var] for k in system.connections],
+        "experiment": {"start": e.start, "stop": e.stop, "step": e.step, "algorithm": e.algorithm,
+                       "output_interval": e.output_interval},
+    }
