@@ -119,6 +119,11 @@ class ReferenceSystem:
             self.state_names += [f"{c.name}.{s}" for s in model.STATES]
         self.x0 = np.array(x0, dtype=float)
         self.columns = [f"{n}.{o}" for n, m in zip(self.names, self.models) for o in m.OUTPUTS]
+        self.units, self.descriptions = {}, {}
+        for n, slave in zip(self.names, self.slaves):
+            for v in type(slave).OUTPUTS:
+                self.units[f"{n}.{v.name}"] = v.unit
+                self.descriptions[f"{n}.{v.name}"] = f"{v.description} [{v.unit}]"
         self.y = [[0.0] * len(m.OUTPUTS) for m in self.models]
 
         # which output feeds each input
@@ -219,12 +224,15 @@ class ReferenceSystem:
         return sorted(pts)
 
 
-def output_times(experiment):
-    """The master's output times: start, then every ``output_interval`` (or every
-    macro step when it is 0) up to and including stop."""
-    dt = experiment.output_interval if experiment.output_interval > 0 else experiment.step
-    n = int(math.floor((experiment.stop - experiment.start) / dt + 1e-9))
-    return experiment.start + dt * np.arange(n + 1)
+def output_times(experiment, step=None):
+    """The master's output times for ``experiment`` (at macro step ``step``, default
+    the experiment's): ceil((stop - start)/step) steps, a row at start and then every
+    ``output_interval`` (rounded to whole steps; 0: every step)."""
+    h = float(experiment.step if step is None else step)
+    n_steps = max(1, math.ceil((experiment.stop - experiment.start) / h - 1e-9))
+    oi = experiment.output_interval
+    every = max(1, round(oi / h)) if oi > 0 else 1
+    return experiment.start + h * every * np.arange(n_steps // every + 1)
 
 
 def solve_reference(system, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf):
@@ -240,7 +248,8 @@ def solve_reference(system, rtol=1e-8, atol=None, method="LSODA", max_step=np.in
     exp = system.experiment
     if atol is None:
         atol = rtol * np.maximum(1.0, np.abs(ref.x0)) if ref.x0.size else rtol
-    t0, t1 = float(exp.start), float(exp.stop)
+    # the master's last step may end after stop (a step that does not divide the interval)
+    t0, t1 = float(exp.start), max(float(exp.stop), float(output_times(exp)[-1]))
     edges = [t0, *[b for b in ref.breakpoints() if t0 < b < t1], t1]
     segments = []
     x = ref.x0.copy()
@@ -286,47 +295,32 @@ class ReferenceSolution:
         return out
 
     def sample(self, t_eval=None):
-        """:class:`ReferenceResult` at ``t_eval`` (default: the master's output times)."""
+        """:class:`~orchestrator.results.Result` at ``t_eval`` (default: the master's
+        output times), every output of every component as a column ``<component>.<variable>``;
+        extra attributes ``states`` (time x states), ``state_names``, ``info``."""
+        from orchestrator.results import Result
         ref = self.ref
         t_eval = output_times(ref.system.experiment) if t_eval is None else np.asarray(t_eval, dtype=float)
+        t_eval = np.atleast_1d(t_eval)
         states = self.states(t_eval)
         ys = np.array([ref.outputs(t, s) for t, s in zip(t_eval, states)]).reshape(t_eval.size, len(ref.columns))
-        columns = {name: ys[:, j] for j, name in enumerate(ref.columns)}
-        return ReferenceResult(t_eval, columns, states, ref.state_names, dict(self.info))
+        exp = ref.system.experiment
+        meta = {"kind": "reference", "status": "ok", "message": "", "start": exp.start, "stop": exp.stop,
+                "algorithm": "monolithic", "solver": self.info,
+                "components": {n: {"model": c.model, "element": c.element, "kind": c.kind}
+                               for n, c in zip(ref.names, ref.system.components)},
+                "system_meta": ref.system.meta}
+        result = Result(t_eval, ys, ref.columns, ref.units, ref.descriptions, meta)
+        result.states, result.state_names, result.info = states, ref.state_names, dict(self.info)
+        return result
 
 
 def simulate_reference(system, t_eval=None, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf):
     """Monolithic reference of ``system``: :func:`solve_reference` sampled at ``t_eval``
     (default: the master's output times, :func:`output_times`). Returns a
-    :class:`ReferenceResult` (``time``, ``columns`` {``<component>.<variable>``: array},
-    ``states``, ``info``)."""
+    :class:`~orchestrator.results.Result` (``result["<component>.<variable>"]``,
+    ``result.time``; extra ``states``, ``state_names``, ``info``)."""
     wall = _time.perf_counter()
     result = solve_reference(system, rtol=rtol, atol=atol, method=method, max_step=max_step).sample(t_eval)
     result.info["wall_s"] = _time.perf_counter() - wall
     return result
-
-
-class ReferenceResult:
-    """Reference solution: ``time`` (array), ``columns`` {``<component>.<variable>``: array},
-    ``states`` (time x states), ``state_names``, ``info`` (solver statistics)."""
-
-    def __init__(self, time, columns, states, state_names, info):
-        self.time = time
-        self.columns = columns
-        self.states = states
-        self.state_names = state_names
-        self.info = info
-
-    def __getitem__(self, name):
-        if name == "time":
-            return self.time
-        return self.columns[name]
-
-    def __contains__(self, name):
-        return name == "time" or name in self.columns
-
-    def __iter__(self):  # (time, columns) unpacking
-        return iter((self.time, self.columns))
-
-    def names(self):
-        return list(self.columns)

@@ -57,8 +57,9 @@ def test_columns_and_times_match_the_master_convention():
     assert r["s1.L"][0] == 1.0 and r["s2.L"][0] == 2.0
     system.experiment.output_interval = 0.005
     assert np.allclose(output_times(system.experiment), [0.0, 0.005, 0.01])
-    time, columns = simulate_reference(system)  # (time, columns) unpacking
-    assert len(time) == 3 and set(columns) == set(r.columns)
+    r2 = simulate_reference(system)
+    assert len(r2.time) == 3 and r2.columns == r.columns
+    assert r2.unit("s1.T") == "N" and r2.ok and r2.meta["kind"] == "reference"
 
 
 def test_dense_solution_samples_anywhere():
@@ -124,3 +125,52 @@ def test_every_fmu_script_is_importable_in_process():
         model_obj = slave.make_model()
         assert tuple(v.name for v in cls.OUTPUTS) == tuple(model_obj.OUTPUTS), model
         assert set(model_obj.INPUTS) <= {v.name for v in cls.INPUTS}, model
+
+
+def idle_roller_line(b=0.0, stop=40.0):
+    """s1 (fed at v0) -> idle roller r -> s2 (pulled at v2)."""
+    comps = [span("s1", 1.0, 0.0, v_in=V0, T_in=0.0),
+             Component("r", "IdleRoller", {"R": R_ROLLER, "J": 0.01, "b": b, "omega0": V0 / R_ROLLER}),
+             span("s2", 1.0, 0.0, v_out=V2)]
+    conns = [Connection("r", "v", "s1", "v_out"), Connection("r", "v", "s2", "v_in"),
+             Connection("s1", "T", "s2", "T_in"), Connection("s1", "T", "r", "T_in"),
+             Connection("s2", "T", "r", "T_out")]
+    return System(comps, conns, Experiment(0.0, stop, 1e-3, output_interval=0.1))
+
+
+V0, V2, R_ROLLER = 1.0, 1.01, 0.05
+
+
+@pytest.mark.skipif("IdleRoller" not in fmu_classes(), reason="no IdleRoller FMU yet")
+def test_idle_roller_between_driven_ends_frictionless_steady_state():
+    # b = 0: T1 = T2 = T, and s2's balance gives T = EA (v2 - v0)/v2, the roller at v0 EA/(EA - T).
+    r = simulate_reference(idle_roller_line())
+    T = EA * (V2 - V0) / V2
+    assert r["s1.T"][-1] == pytest.approx(T, rel=1e-4)
+    assert r["s2.T"][-1] == pytest.approx(T, rel=1e-4)
+    assert r["r.v"][-1] == pytest.approx(V0 * EA / (EA - T), rel=1e-6)
+    # the angle is the integral of the speed
+    assert r["r.theta"][-1] == pytest.approx(np.trapezoid(r["r.omega"], r.time), rel=1e-4)
+
+
+@pytest.mark.skipif("IdleRoller" not in fmu_classes(), reason="no IdleRoller FMU yet")
+def test_idle_roller_with_friction_steady_state():
+    # T1 = EA (v - v0)/v, T2 = EA (v2 - v)/v2 + v T1/v2, R (T2 - T1) = b v/R: solve for the roller speed v.
+    from scipy.optimize import brentq
+    b = 0.05
+
+    def tensions(v):
+        T1 = EA * (v - V0) / v
+        return T1, EA * (V2 - v) / V2 + v * T1 / V2
+
+    def balance(v):
+        T1, T2 = tensions(v)
+        return R_ROLLER * (T2 - T1) - b * v / R_ROLLER
+
+    v = brentq(balance, V0 * 1.0000001, V2)
+    T1, T2 = tensions(v)
+    r = simulate_reference(idle_roller_line(b=b))
+    assert r["r.v"][-1] == pytest.approx(v, rel=1e-6)
+    assert r["s1.T"][-1] == pytest.approx(T1, rel=1e-4)
+    assert r["s2.T"][-1] == pytest.approx(T2, rel=1e-4)
+    assert T2 > T1  # friction: the web pulls harder on the way out
