@@ -80,8 +80,10 @@ def test_libcosim_matches_our_master(two_span_ssp):
     assert ours.ok
     t, d = simulate_libcosim(two_span_ssp)
     assert np.allclose(ours.time[1:], t)  # libcosim has no row at the start time
-    for col in ("s1.T", "s1.L", "s2.T", "s2.L", "s2.dL"):
+    for col in ("s1.T", "s2.T"):
         assert _rel_err(d[col], ours[col][1:]) < 1e-3, col
+    for col in ("s1.L", "s2.L", "s2.dL"):
+        assert np.allclose(d[col], ours[col][1:], rtol=1e-3, atol=1e-12), col
 
 
 def test_parameter_files_variant(tmp_path):
