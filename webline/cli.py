@@ -10,6 +10,8 @@ COMMANDS = {
     "build-fmus": ("fmus.build", "build every element FMU into one folder"),
     "sweep": ("orchestrator.sweep_cmd", "run a parameter sweep (grid / Monte Carlo) of a layout"),
     "plot-sweep": ("orchestrator.sweep_plot", "plot a finished sweep (sweep.csv)"),
+    "accuracy": ("orchestrator.accuracy_cmd", "co-simulation error vs the monolithic reference, per step/algorithm"),
+    "export-ssp": ("orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
 }
 
 
