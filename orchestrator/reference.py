@@ -211,16 +211,12 @@ class ReferenceSystem:
         return [v for y in self.y for v in y]
 
     def breakpoints(self):
-        """Times where an input signal has a kink (Profile knots), inside the experiment."""
+        """Times where an input signal has a kink or a step (Profile points), inside the experiment."""
         exp = self.system.experiment
         pts = set()
-        for c in self.system.components:
+        for c, model in zip(self.system.components, self.models):
             if c.model == "Profile":
-                n = int(round(c.parameters.get("n", 0)))
-                for k in range(1, n + 1):
-                    t = c.parameters.get(f"t[{k}]")
-                    if t is not None and exp.start < t < exp.stop:
-                        pts.add(float(t))
+                pts.update(float(t) for t in getattr(model, "t", ()) if exp.start < t < exp.stop)
         return sorted(pts)
 
 

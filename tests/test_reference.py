@@ -174,3 +174,22 @@ def test_idle_roller_with_friction_steady_state():
     assert r["s1.T"][-1] == pytest.approx(T1, rel=1e-4)
     assert r["s2.T"][-1] == pytest.approx(T2, rel=1e-4)
     assert T2 > T1  # friction: the web pulls harder on the way out
+
+
+@pytest.mark.skipif("Profile" not in fmu_classes(), reason="no Profile FMU yet")
+def test_profile_ramp_drives_a_span_exactly():
+    # v_out ramps 1.0 -> 1.02 over [0.5, 1.5] s; the integration restarts at the knots.
+    prof = Component("p", "Profile", {"n": 3, "t[1]": 0.5, "y[1]": 1.0, "t[2]": 1.5, "y[2]": 1.02,
+                                      "t[3]": 4.0, "y[3]": 1.02})
+    s = System([prof, span("s", 1.0, 0.0, v_in=1.0, T_in=0.0)], [Connection("p", "y", "s", "v_out")],
+               Experiment(0.0, 4.0, 1e-3))
+    ref = ReferenceSystem(s)
+    assert ref.breakpoints() == [0.5, 1.5]
+    r = simulate_reference(s)
+    assert np.max(np.abs(r["s.T"][r.time <= 0.5])) < 1e-9
+    assert r["p.y"][r.time >= 1.5] == pytest.approx(1.02)
+    # a constant-speed tail after the ramp: first-order decay towards the steady state
+    T_ss = steady_state_tension(0.0, 1.0, 1.02, EA)
+    i = np.searchsorted(r.time, 1.5)
+    tail = T_ss + (r["s.T"][i] - T_ss) * np.exp(-1.02 * (r.time[i:] - r.time[i]))
+    assert np.max(np.abs(r["s.T"][i:] - tail)) < 1e-5 * T_ss
