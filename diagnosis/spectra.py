@@ -10,7 +10,7 @@ All spectra use a Hann window and are scaled so that a sinusoid of amplitude A
 (on a bin) shows a peak of height A.
 
 Public: :func:`amplitude_spectrum`, :func:`frequency_resolution`,
-:func:`noise_floor`, :func:`significance_factor`, :func:`spectral_peaks`,
+:func:`noise_floor`, :func:`significance_factor`, :func:`spectral_peaks`, :func:`interpolate_peak`,
 :class:`Peaks`, :class:`Family`, :func:`family`, :class:`Tag`, :func:`tag_peaks`.
 """
 from typing import NamedTuple
@@ -93,18 +93,18 @@ class Peaks(NamedTuple):
     threshold: np.ndarray
 
 
-def _interpolate(f, amp, k):
+def interpolate_peak(f, amp, k):
     """Frequency and amplitude of the peak at bin k by a parabola through the log
     amplitudes of bins k-1, k, k+1 (Gaussian interpolation; Hann scalloping
     loss of up to 15 % drops to about 1 %)."""
     if k <= 0 or k >= len(amp) - 1 or min(amp[k - 1], amp[k], amp[k + 1]) <= 0:
-        return f[k], amp[k]
+        return float(f[k]), float(amp[k])
     a, b, c = np.log(amp[k - 1:k + 2])
     den = a - 2 * b + c
     if den >= 0:
-        return f[k], amp[k]
+        return float(f[k]), float(amp[k])
     d = 0.5 * (a - c) / den
-    return f[k] + d * (f[1] - f[0]), float(np.exp(b - 0.25 * (a - c) * d))
+    return float(f[k] + d * (f[1] - f[0])), float(np.exp(b - 0.25 * (a - c) * d))
 
 
 def spectral_peaks(f, amp, *, alpha=0.01, floor=None, fmin=None, fmax=None, leakage_margin=3.0):
@@ -139,7 +139,7 @@ def spectral_peaks(f, amp, *, alpha=0.01, floor=None, fmin=None, fmax=None, leak
     idx = idx[np.argsort(amp[idx])[::-1]]
     kept, freqs, amps = [], [], []
     for k in idx:
-        fk, ak = _interpolate(f, amp, k)
+        fk, ak = interpolate_peak(f, amp, k)
         if kept:
             leak = np.sum(np.array(amps) * _hann_leakage((fk - np.array(freqs)) / df))
             if ak <= leakage_margin * leak or np.min(np.abs(fk - np.array(freqs))) < MAIN_LOBE_BINS * df:
