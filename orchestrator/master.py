@@ -288,6 +288,10 @@ class Plan:
         self.columns, self.units, self.descriptions = columns, units, descriptions
 
 
+def _a(word):
+    return ("an " if word[0] in "aeiou" else "a ") + word
+
+
 def check_system(system, models):
     """Structural problems of ``system`` against the FMUs (raises SetupError listing all)."""
     problems = list(system.check())
@@ -305,8 +309,7 @@ def check_system(system, models):
                 if v is None:
                     problems.append(f"component {c.name!r}: model {c.model} has no variable {name!r}")
                 elif v.causality not in causality:
-                    problems.append(f"component {c.name!r}: {name!r} is a {v.causality}, "
-                                    f"not a{'n' if kind == 'input' else ''} {kind}")
+                    problems.append(f"component {c.name!r}: {name!r} is {_a(v.causality)}, not {_a(kind)}")
     for k in system.connections:
         for comp, var, want in ((k.src, k.src_var, "output"), (k.dst, k.dst_var, "input")):
             c = by_name.get(comp)
@@ -318,7 +321,7 @@ def check_system(system, models):
                                 f"model {c.model} has no variable {var!r}")
             elif v.causality != want or v.type != "Real":
                 problems.append(f"connection {k.src}.{k.src_var} -> {k.dst}.{k.dst_var}: "
-                                f"{comp}.{var} is a {v.type} {v.causality}, expected a Real {want}")
+                                f"{comp}.{var} is {_a(v.type)} {v.causality}, expected a Real {want}")
     e = system.experiment
     if e.algorithm not in ALGORITHMS:
         problems.append(f"experiment.algorithm {e.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
@@ -399,6 +402,15 @@ def plan_coupling(slaves, connections):
             units[col] = s.model.unit(o)
             descriptions[col] = s.model.description(o)
     groups.sort(key=lambda g: g.level)  # stable: system order within a level
+    # a generic output (unit "1", e.g. Profile.y) takes the unit of the inputs it feeds
+    model_of = {s.name: s.model for s in slaves}
+    fed_units = {}
+    for (dst, inp), node in feeds.items():
+        fed_units.setdefault(node, set()).add(model_of[dst].unit(inp))
+    for (src, out), us in fed_units.items():
+        col = f"{src}.{out}"
+        if units.get(col) in ("", "1") and len(us) == 1 and next(iter(us)) not in ("", "1"):
+            units[col] = next(iter(us))
 
     # u layout
     n_u = 0
