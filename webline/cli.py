@@ -8,6 +8,7 @@ import sys
 # sub-command -> (module with main(argv) -> int, one-line help)
 COMMANDS = {
     "build-fmus": ("fmus.build", "build every element FMU into one folder"),
+    "orders": ("diagnosis.orders_cmd", "order spectra and shaft-tagged tension peaks of measured data"),
     "run": ("orchestrator.run_cmd", "co-simulate a line layout, save results.h5 (and .csv)"),
     "plot": ("orchestrator.plot_cmd", "plot tensions, speeds and tension spectra of a run"),
     "sweep": ("orchestrator.sweep_cmd", "run a parameter sweep (grid / Monte Carlo) of a layout"),
