@@ -284,3 +284,17 @@ def test_load_cell_noise_independent_of_stepping(fmus):
     assert len(set(a)) == len(a)
     fine.free()
     coarse.free()
+
+
+def test_span_angle_advances_from_when_it_was_set(fmus):
+    # The angle input is set once; a master then sets only the speeds. The
+    # span keeps advancing the angle with omega_up: L = L0 + C sin(w t + psi).
+    w, C, psi = 3.0, 2.0e-3, 0.2
+    span = Instance(fmus["Span"], "s", {"EA": 1e4, "L0": 1.0, "T0": 100.0, "up.C[1]": C, "up.psi[1]": psi},
+                    {"theta_up": 0.0, "omega_up": w, "v_in": 1.0, "v_out": 1.0}).init()
+    h = 0.01
+    for k in range(100):
+        span.set({"v_in": 1.0 + 1e-4 * k, "v_out": 1.0 + 1e-4 * k})
+        span.step(k * h, h)
+        assert span.get(["L"])[0] == pytest.approx(1.0 + C * math.sin(w * (k + 1) * h + psi), abs=1e-12)
+    span.free()

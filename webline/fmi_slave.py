@@ -193,7 +193,9 @@ class ElementSlave(Fmi2Slave):
         self.failed = False
         self.model = None
         self.time = 0.0
-        self.since_inputs = 0.0  # time since the inputs were last set
+        # Time since each input was last set: an extrapolated input (an angle)
+        # advances from its own setting time, whichever other inputs a master sets.
+        self.since_set = {}
         self.x = []
         for v in self.parameters():
             self._declare(v, Fmi2Causality.parameter, Fmi2Variability.fixed, None)
@@ -226,7 +228,7 @@ class ElementSlave(Fmi2Slave):
         def set_(value):
             setattr(self, attr, value)
             if is_input:
-                self.since_inputs = 0.0
+                self.since_set[attr] = 0.0
 
         self.register_variable(Real(
             v.name, causality=causality, variability=variability, initial=initial,
@@ -284,15 +286,16 @@ class ElementSlave(Fmi2Slave):
         return next(v.attr for v in (*self.INPUTS, *self.OUTPUTS) if v.name == name)
 
     def _inputs(self, s):
-        """Model inputs ``s`` seconds after they were set (extrapolated ones advanced)."""
-        u = [getattr(self, a) for a in self._input_attrs]
-        if s:
-            for i, r in self._input_index:
-                u[i] += u[r] * s
+        """Model inputs ``s`` seconds after the current time, extrapolated ones advanced
+        linearly from the time they were set."""
+        attrs = self._input_attrs
+        u = [getattr(self, a) for a in attrs]
+        for i, r in self._input_index:
+            u[i] += u[r] * (self.since_set.get(attrs[i], 0.0) + s)
         return u
 
     def _refresh_outputs(self):
-        y = self.model.outputs(self.time, self.x, self._inputs(self.since_inputs))
+        y = self.model.outputs(self.time, self.x, self._inputs(0.0))
         for a, value in zip(self._output_attrs, y):
             setattr(self, a, value)
 
@@ -301,17 +304,18 @@ class ElementSlave(Fmi2Slave):
             return False
         try:
             if self.x:
-                t0, s0 = current_time, self.since_inputs
+                t0 = current_time
                 model, inputs = self.model, self._inputs
                 held = None if self._input_index else inputs(0.0)
 
                 def f(t, x):
-                    return model.derivatives(t, x, held if held is not None else inputs(s0 + t - t0))
+                    return model.derivatives(t, x, held if held is not None else inputs(t - t0))
 
                 h_max = min(self.max_step, model.max_substep(self.x))
                 self.x = integrate(f, current_time, self.x, step_size, h_max)
             self.time = current_time + step_size
-            self.since_inputs += step_size
+            for a in self._input_attrs:
+                self.since_set[a] = self.since_set.get(a, 0.0) + step_size
             self._refresh_outputs()
         except Exception:
             self.failed = True
