@@ -178,6 +178,7 @@ def plot_results(result, out_dir, window=None, fmax=None):
             band = f <= fmax
             if band.any():
                 ax.plot(f[band], a[band], lw=0.9, color="k")
+                ax.set_ylim(bottom=0.0, top=1.15 * float(a[band].max()) or 1.0)
             ax.set_ylabel(f"{_element(result, c.split('.')[0])}\namplitude [N]")
         else:
             ax.text(0.5, 0.5, "no tension columns", transform=ax.transAxes, ha="center")
