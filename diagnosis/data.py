@@ -140,11 +140,11 @@ def _check_expected(unit, expected, path, column):
         return
     ureg = _ureg()
     try:
-        got, want = ureg.Quantity(1.0, unit), ureg.Quantity(1.0, expected)
         same = si_unit(unit) == si_unit(expected)
     except ValueError as exc:
         raise DataError(path, column, str(exc)) from None
     if not same:
+        got, want = ureg.Quantity(1.0, unit), ureg.Quantity(1.0, expected)
         raise DataError(path, column, f"unit {unit!r} has dimension {got.dimensionality}, "
                                       f"expected {expected!r} ({want.dimensionality})")
 
@@ -234,13 +234,26 @@ def from_arrays(time, columns, units=None, *, source="<arrays>", expect=None,
                   source=str(source), resampled=resampled, filled=filled)
 
 
-def _time_key(names, path):
-    lower = {n.lower(): n for n in names}
+def _time_key_or_none(names):
+    """The time column among ``names``: an exact TIME_NAMES match first, then a
+    case-insensitive one if it is unique (``T`` beside ``t`` is a tension)."""
+    names = [str(n) for n in names]
     for cand in TIME_NAMES:
-        if cand in lower:
-            return lower[cand]
-    raise DataError(path, "time", f"missing time column (looked for {' / '.join(TIME_NAMES)}; "
-                                  f"have: {', '.join(names) or 'none'})")
+        if cand in names:
+            return cand
+    for cand in TIME_NAMES:
+        hits = [n for n in names if n.lower() == cand]
+        if len(hits) == 1:
+            return hits[0]
+    return None
+
+
+def _time_key(names, path):
+    key = _time_key_or_none(names)
+    if key is None:
+        raise DataError(path, "time", f"missing time column (looked for {' / '.join(TIME_NAMES)}; "
+                                      f"have: {', '.join(map(str, names)) or 'none'})")
+    return key
 
 
 # ----------------------------------------------------------------------------- CSV
@@ -331,11 +344,6 @@ def _mat_columns(variables, path):
             raise DataError(path, name, f"not a vector (shape {arr.shape})")
         columns[name] = arr.astype(float).ravel()
     return time, columns, units
-
-
-def _time_key_or_none(variables):
-    lower = {str(k).lower() for k in variables}
-    return next((c for c in TIME_NAMES if c in lower), None)
 
 
 def _h5_to_dict(group):
