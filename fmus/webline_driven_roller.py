@@ -42,4 +42,5 @@ class DrivenRoller(ElementSlave):
     )
 
     def make_model(self):
-        return DrivenRollerModel(self.R, self.J, self.b, self.omega0, self.theta0, drive_from(self))
+        return DrivenRollerModel(self.R, self.J, self.b, self.omega0, self.theta0, drive_from(self),
+                                 tau0=self.tau)

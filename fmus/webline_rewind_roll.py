@@ -28,4 +28,5 @@ class RewindRoll(ElementSlave):
 
     def make_model(self):
         return RewindRollModel(self.R0, self.R_core, self.thickness, self.width, self.rho, self.J_core,
-                               self.b, self.omega0, self.theta0, drive_from(self))
+                               self.b, self.omega0, self.theta0, drive_from(self),
+                               tau0=self.tau)

@@ -29,4 +29,5 @@ class UnwindRoll(ElementSlave):
 
     def make_model(self):
         return UnwindRollModel(self.R0, self.R_core, self.thickness, self.width, self.rho, self.J_core,
-                               self.b, self.omega0, self.theta0, drive_from(self))
+                               self.b, self.omega0, self.theta0, drive_from(self),
+                               tau0=self.tau)

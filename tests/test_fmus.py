@@ -232,8 +232,8 @@ def test_driven_roller_fmu_picks_a_safe_substep(fmus):
     Jm, J, k, tau = 0.01, 0.01, 2.0e4, 1.0
     wn = math.sqrt(k * (1 / Jm + 1 / J))
     roller = Instance(fmus["DrivenRoller"], "d", {"R": 0.1, "J": J, "drive.enabled": 1, "drive.J_motor": Jm,
-                                                  "drive.stiffness": k, "drive.damping": 0.0},
-                      {"tau": tau}).init()
+                                                  "drive.stiffness": k, "drive.damping": 0.0}).init()
+    roller.set({"tau": tau})  # a torque step after an unloaded start
     h = 1.0e-3
     amp = tau / (Jm * wn)
     worst = 0.0
@@ -298,3 +298,15 @@ def test_span_angle_advances_from_when_it_was_set(fmus):
         span.step(k * h, h)
         assert span.get(["L"])[0] == pytest.approx(1.0 + C * math.sin(w * (k + 1) * h + psi), abs=1e-12)
     span.free()
+
+
+def test_driven_roller_fmu_with_backlash_starts_at_its_operating_point(fmus):
+    # The layout starts a line at its operating point with tau = holding torque
+    # (-2.84 N.m here); the preloaded shaft keeps the roller at 8 rad/s.
+    p = {"R": 0.1, "J": 0.05, "b": 0.02, "omega0": 8.0, "drive.enabled": 1, "drive.J_motor": 0.02,
+         "drive.stiffness": 5e3, "drive.damping": 0.3, "drive.backlash": 2e-3}
+    roller = Instance(fmus["DrivenRoller"], "d", p, {"tau": 0.16 - 3.0, "T_in": 100.0, "T_out": 130.0}).init()
+    for k in range(100):
+        roller.step(k * 0.005, 0.005)
+    assert roller.get(["omega", "omega_motor"]) == [pytest.approx(8.0, rel=1e-10)] * 2
+    roller.free()

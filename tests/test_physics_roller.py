@@ -105,3 +105,19 @@ def test_roller_problems():
     assert [n for n, _ in DrivenRollerModel(R=0.1, J=0.1, drive=Drive(0.5)).problems()] == ["drive.enabled"]
     # disabled drive: its parameters are not used, so not checked
     assert DrivenRollerModel(R=0.1, J=0.1, drive=Drive(0, J_motor=0.0)).problems() == []
+
+
+@pytest.mark.parametrize("backlash", [0.0, 2.0e-3])
+def test_drive_starts_in_equilibrium_with_the_initial_torque(backlash):
+    # holding torque of {22}: tau = b w - R (T_out - T_in) = 0.16 - 3 = -2.84 N.m;
+    # the shaft starts twisted by tau/k (+ half the backlash, on the loaded side)
+    R, J, b, w, T_in, T_out = 0.1, 0.05, 0.02, 8.0, 100.0, 130.0
+    tau = b * w - R * (T_out - T_in)
+    d = Drive(1, J_motor=0.02, stiffness=5e3, damping=0.3, backlash=backlash)
+    m = DrivenRollerModel(R=R, J=J, b=b, omega0=w, drive=d, tau0=tau)
+    x0 = m.initial_state()
+    assert x0[2] - x0[1] == pytest.approx(-2.84 / 5e3 - backlash / 2, rel=1e-12)
+    assert m.derivatives(0.0, x0, [tau, T_in, T_out]) == [pytest.approx(0.0, abs=1e-12), w, w,
+                                                         pytest.approx(0.0, abs=1e-12)]
+    x = simulate(m, [tau, T_in, T_out], 0.5)
+    assert x[0] == pytest.approx(w, rel=1e-10) and x[3] == pytest.approx(w, rel=1e-10)

@@ -107,7 +107,8 @@ def drive_vars():
     only when ``drive.enabled`` is 1."""
     return (
         Var("drive.enabled", "1", 0, "Non-ideal drive: 0 ideal (tau acts on the element), 1 motor inertia + "
-            "compliant shaft with backlash (tau acts on the motor)", check=choice(0.0, 1.0)),
+            "compliant shaft with backlash (tau acts on the motor; the shaft starts twisted to carry "
+            "the initial tau)", check=choice(0.0, 1.0)),
         Var("drive.J_motor", "kg.m2", 0.01, "Motor-side inertia (non-ideal drive)", check=finite),
         Var("drive.stiffness", "N.m/rad", 1.0e4, "Torsional stiffness of the shaft/coupling (non-ideal drive)",
             check=finite),
@@ -174,8 +175,10 @@ class ElementSlave(Fmi2Slave):
     :class:`Var`; inputs and outputs named as in the model's ``INPUTS`` and
     ``OUTPUTS``) and ``make_model()``, which builds the model from the
     parameter attributes. The wrapper integrates the model's states over each
-    macro step with RK4 sub-steps no longer than ``max_step``, holding the
-    inputs (or advancing the model's ``EXTRAPOLATE`` inputs linearly).
+    macro step with RK4 sub-steps no longer than ``max_step`` nor than the
+    model's ``max_substep(x)`` (a stiff drive shaft picks its own), holding the
+    inputs (or advancing the model's ``EXTRAPOLATE`` inputs linearly from the
+    time each was set).
     Outputs that depend on inputs are recomputed whenever they are read, so a
     master can resolve feed-through chains at a communication point.
     """

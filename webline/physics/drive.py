@@ -85,9 +85,20 @@ class Drive:
                 p.append((prefix + name, f"must be >= 0 (got {value!r})"))
         return p
 
-    def initial_state(self, theta0, omega0):
-        """Motor aligned with the element (no twist, no torque through the shaft at t0)."""
-        return [theta0, omega0] if self.enabled else []
+    def preload_twist(self, tau0):
+        """Twist at which the shaft passes the torque ``tau0`` at rest (teeth in contact)."""
+        if tau0 == 0.0:
+            return 0.0
+        return tau0 / self.stiffness + math.copysign(0.5 * self.backlash, tau0)
+
+    def initial_state(self, theta0, omega0, tau0=0.0):
+        """Motor at the element's speed, ahead of it by the twist that carries ``tau0``.
+
+        With ``tau0`` the motor torque at the start, motor and element are in
+        equilibrium: a line started at its operating point does not first jolt
+        through the dead zone and wind up the shaft.
+        """
+        return [theta0 + self.preload_twist(tau0), omega0] if self.enabled else []
 
     def element_torque(self, tau, theta, omega, xm):
         """(torque on the element, [d theta_m/dt, d omega_m/dt]) for motor torque ``tau``.

@@ -55,17 +55,19 @@ class _MaterialRollModel(ElementModel):
     includes the motor, with the non-ideal drive the motor is ``drive.J_motor``.
     The output ``J`` is the total inertia the motor accelerates (what K_p = J K_ref
     of {24} needs): {3} plus ``drive.J_motor`` when the drive is enabled.
+    ``tau0``: motor torque at the start, which the non-ideal drive's shaft
+    initially carries (see ``Drive.initial_state``).
     """
 
     WINDING = 0  # -1 unwind, +1 rewind
     OUTPUTS = ("omega", "theta", "R", "v", "J", "omega_motor")
 
     def __init__(self, R0, R_core, thickness, width, rho, J_core=0.0, b=0.0, omega0=0.0, theta0=0.0,
-                 drive=None):
+                 drive=None, tau0=0.0):
         self.R0, self.R_core, self.thickness = R0, R_core, thickness
         self.width, self.rho, self.J_core, self.b = width, rho, J_core, b
         self.omega0, self.theta0 = omega0, theta0
-        self.drive = drive or Drive()
+        self.drive, self.tau0 = drive or Drive(), tau0
         self.STATES = ("omega", "theta", "R") + self.drive.states
 
     def problems(self):
@@ -80,7 +82,7 @@ class _MaterialRollModel(ElementModel):
         raise NotImplementedError
 
     def initial_state(self):
-        return [self.omega0, self.theta0, self.R0] + self.drive.initial_state(self.theta0, self.omega0)
+        return [self.omega0, self.theta0, self.R0] + self.drive.initial_state(self.theta0, self.omega0, self.tau0)
 
     def roll_inertia(self, R):
         """J of {3}, {4}."""

@@ -51,22 +51,23 @@ class DrivenRollerModel(ElementModel):
 
     Input ``tau`` is the motor torque. With the ideal drive ``J`` includes the
     motor; with the non-ideal drive ``J`` is the roller side only and the motor
-    is ``drive.J_motor``. States [omega, theta] (+ [theta_motor, omega_motor]).
+    is ``drive.J_motor``. States [omega, theta] (+ [theta_motor, omega_motor]);
+    ``tau0`` the motor torque at the start, carried by the shaft's initial twist.
     """
 
     INPUTS = ("tau", "T_in", "T_out")
     OUTPUTS = ("omega", "theta", "v", "omega_motor")
 
-    def __init__(self, R, J, b=0.0, omega0=0.0, theta0=0.0, drive=None):
+    def __init__(self, R, J, b=0.0, omega0=0.0, theta0=0.0, drive=None, tau0=0.0):
         self.R, self.J, self.b, self.omega0, self.theta0 = R, J, b, omega0, theta0
-        self.drive = drive or Drive()
+        self.drive, self.tau0 = drive or Drive(), tau0
         self.STATES = ("omega", "theta") + self.drive.states
 
     def problems(self):
         return _roller_problems(self) + self.drive.problems()
 
     def initial_state(self):
-        return [self.omega0, self.theta0] + self.drive.initial_state(self.theta0, self.omega0)
+        return [self.omega0, self.theta0] + self.drive.initial_state(self.theta0, self.omega0, self.tau0)
 
     def derivatives(self, t, x, u):
         tau_el, dxm = self.drive.element_torque(u[0], x[1], x[0], x[2:])
