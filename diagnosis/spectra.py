@@ -134,8 +134,8 @@ def spectral_peaks(f, amp, *, alpha=0.01, floor=None, fmin=None, fmax=None, leak
     hi = f[-1] if fmax is None else fmax
     search = (f >= lo) & (f <= hi)
     threshold = significance_factor(int(search.sum()), alpha) * margin * floor
-    idx, _ = scipy.signal.find_peaks(np.where(search, amp, 0.0))
-    idx = idx[amp[idx] > threshold[idx]]
+    idx, _ = scipy.signal.find_peaks(amp)  # true local maxima: a leak falling off DC has none
+    idx = idx[search[idx] & (amp[idx] > threshold[idx])]
     idx = idx[np.argsort(amp[idx])[::-1]]
     kept, freqs, amps = [], [], []
     for k in idx:
