@@ -144,7 +144,8 @@ def _allowed_keys(loc):
                 return []
     tp = _unwrap(tp)
     if isinstance(tp, type) and issubclass(tp, BaseModel):
-        return [f.alias or n for n, f in tp.model_fields.items()]
+        keys = [f.alias or n for n, f in tp.model_fields.items()]
+        return sorted(keys, key=lambda k: (k not in ("name", "type"), k != "name"))  # name, type first
     return []
 
 

@@ -16,7 +16,8 @@ has no start-up transient. The equations are the element models' own
 * driven elements: the motor torque that holds the speed ({7}, {8}, {22});
   the speed PI integrator makes the controller output that torque with zero
   speed error (with feed-forward it only covers what the feed-forward
-  misses: the roll's inertia-change term {6}).
+  misses: the roll's inertia-change term {6} and the slow acceleration that
+  keeps a roll's surface speed constant while its radius changes {5}).
 
 Friction terms depend on the speeds and the speeds on the tensions, so the
 two are iterated to a fixed point (a few iterations; exact at zero speed).
@@ -26,7 +27,7 @@ from dataclasses import dataclass, field
 
 from webline.physics.controllers import speed_gains
 from webline.physics.load_cell import measured_tension, wrap_weights
-from webline.physics.material_roll import inertia, rewind_acceleration, unwind_acceleration
+from webline.physics.material_roll import inertia, radius_rate, rewind_acceleration, unwind_acceleration
 from webline.physics.roller import holding_torque
 from webline.physics.span import speed_ratio_for_tension
 
@@ -78,13 +79,25 @@ def idle_tension_rise(omega, R, b):
     return holding_torque(omega, R, 0.0, 0.0, b) / R
 
 
-def holding_motor_torque(el, omega, T_in, T_out, web):
-    """Motor torque (direction of rotation) that keeps driven element ``el`` at constant speed."""
+def tracking_acceleration(el, omega, web):
+    """d omega/dt that keeps a roll's surface speed R omega constant while its radius changes ({5}):
+    omega' = -omega R'/R (the unwind speeds up, the rewind slows down); 0 for rollers."""
+    if el.kind not in ("unwind", "rewind"):
+        return 0.0
+    return -omega * radius_rate(omega, web["thickness"], -1 if el.kind == "unwind" else 1) / el.R
+
+
+def holding_motor_torque(el, omega, T_in, T_out, web, J=1.0):
+    """Motor torque (direction of rotation) that keeps driven element ``el`` at constant surface speed.
+
+    Rollers: {22} at omega' = 0. Rolls: {7}/{8} at omega' = ``tracking_acceleration``
+    (J the roll's inertia): J (omega' - a0), a0 the acceleration without motor torque."""
     if el.kind == "unwind":
-        # {7} with J = 1: the angular acceleration without motor torque is minus the torque needed
-        return -unwind_acceleration(omega, el.R, T_out, 0.0, 1.0, el.b, web["rho"], web["width"], web["thickness"])
+        a0 = unwind_acceleration(omega, el.R, T_out, 0.0, J, el.b, web["rho"], web["width"], web["thickness"])
+        return J * (tracking_acceleration(el, omega, web) - a0)
     if el.kind == "rewind":
-        return -rewind_acceleration(omega, el.R, T_in, 0.0, 1.0, el.b, web["rho"], web["width"], web["thickness"])
+        a0 = rewind_acceleration(omega, el.R, T_in, 0.0, J, el.b, web["rho"], web["width"], web["thickness"])
+        return J * (tracking_acceleration(el, omega, web) - a0)
     return holding_torque(omega, el.R, T_in, T_out, el.b)
 
 
@@ -128,7 +141,7 @@ def solve(elements, zones, EA, master, v_line, web, tol=1e-13, max_iter=100):
     for i, e in enumerate(elements):
         if e.kind in ("unwind", "rewind", "driven_roller"):
             t_in, t_out = op.element_tensions(i)
-            op.torque[e.name] = holding_motor_torque(e, omega[i], t_in, t_out, web)
+            op.torque[e.name] = holding_motor_torque(e, omega[i], t_in, t_out, web, J[i])
     return op
 
 

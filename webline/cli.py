@@ -15,6 +15,7 @@ COMMANDS = {
     "plot-sweep": ("orchestrator.sweep_plot", "plot a finished sweep (sweep.csv)"),
     "accuracy": ("orchestrator.accuracy_cmd", "co-simulation error vs the monolithic reference, per step/algorithm"),
     "export-ssp": ("orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
+    "validate": ("orchestrator.validate_cmd", "check a line layout (file:line: field: reason), print its operating point"),
 }
 
 
