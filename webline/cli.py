@@ -16,6 +16,7 @@ COMMANDS = {
     "accuracy": ("orchestrator.accuracy_cmd", "co-simulation error vs the monolithic reference, per step/algorithm"),
     "export-ssp": ("orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
     "validate": ("orchestrator.validate_cmd", "check a line layout (file:line: field: reason), print its operating point"),
+    "diagnose": ("diagnosis.diagnose_cmd", "find the unmodelled effect behind a model-vs-measured tension gap"),
 }
 
 

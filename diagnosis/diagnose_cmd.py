@@ -1,0 +1,61 @@
+"""``webline diagnose LAYOUT RUN [RUN ...] --out DIR [--holdout RUN ...]``.
+
+Where model and measured tension differ, which unmodelled effect causes it,
+and how far the gap shrinks once the effect is in the model (docs/diagnose.md).
+Exit codes: 0 done (with or without an effect found), 1 a simulation failed,
+2 bad input (layout, run file, data).
+"""
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+
+def parser():
+    ap = argparse.ArgumentParser(
+        prog="webline diagnose",
+        description="Find the unmodelled effect behind the gap between a line model and measured tension.")
+    ap.add_argument("layout", type=Path, help="line layout (YAML)")
+    ap.add_argument("runs", type=Path, nargs="+", help="run files (YAML: data + conditions) to fit on")
+    ap.add_argument("--out", type=Path, required=True, help="output folder (report.json, report.html, refined_layout.yaml)")
+    ap.add_argument("--holdout", type=Path, nargs="+", default=[], metavar="RUN",
+                    help="runs not used for fitting: the refined model is checked on them")
+    ap.add_argument("--harmonics", type=int, default=6, help="Fourier terms per element (default 6, as {32})")
+    ap.add_argument("--max-effects", type=int, default=5, help="most effects to add (default 5)")
+    ap.add_argument("--significance", type=float, default=-8.0,
+                    help="log10 false-alarm probability an effect must beat (default -8)")
+    ap.add_argument("--no-polish", action="store_true", help="skip the Gauss-Newton polish simulation")
+    ap.add_argument("--no-other", action="store_true",
+                    help="do not screen backlash, compliance, sensor and parameter effects")
+    ap.add_argument("--quiet", action="store_true", help="only warnings")
+    return ap
+
+
+def main(argv=None):
+    args = parser().parse_args(argv)
+    from diagnosis.pipeline import DiagnoseError, Options, diagnose
+    from diagnosis.line_model import SimulationFailed
+
+    logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
+                        format="%(asctime)s %(message)s", datefmt="%H:%M:%S", stream=sys.stderr)
+    if args.harmonics < 1 or args.harmonics > 8:
+        print("webline diagnose: --harmonics must be 1..8 (the span model has 8 Fourier terms)", file=sys.stderr)
+        return 2
+    opt = Options(harmonics=args.harmonics, max_effects=args.max_effects, significance=args.significance,
+                  polish=not args.no_polish, other_effects=not args.no_other,
+                  progress=not args.quiet and sys.stderr.isatty())
+    try:
+        rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
+    except DiagnoseError as exc:
+        print(f"webline diagnose: {exc}", file=sys.stderr)
+        return 2
+    except SimulationFailed as exc:
+        print(f"webline diagnose: {exc}", file=sys.stderr)
+        return 1
+    print(rep["verdict"])
+    print(f"report: {args.out / 'report.html'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

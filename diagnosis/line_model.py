@@ -1,0 +1,137 @@
+"""The line model as the diagnosis uses it: a layout, run conditions, edits, a co-simulation.
+
+:class:`LineModel` builds a :class:`~orchestrator.system.System` from the
+layout under a run's conditions (``orchestrator.layout.load_system`` with the
+run's overrides), applies edits (eccentricity on an element, a drive made
+non-ideal, a parameter scaled), runs the fmpy master and returns the columns
+sampled on the run's time grid.
+
+Edits come in two forms: ``doc`` edits change the layout document itself
+(what ``refined_layout.yaml`` holds) and ``system`` edits are callables on the
+built System (screening only).
+"""
+import copy
+import logging
+import tempfile
+import time as _time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+log = logging.getLogger("webline.diagnose")
+
+
+class SimulationFailed(RuntimeError):
+    pass
+
+
+@dataclass
+class Sim:
+    system: object
+    columns: dict          # column -> array on the run's time grid
+    wall: float = 0.0
+
+    def __getitem__(self, k):
+        return self.columns[k]
+
+    def __contains__(self, k):
+        return k in self.columns
+
+
+class LineModel:
+    def __init__(self, layout_path, fmu_paths=None, progress=False):
+        from diagnosis import layout_edit
+        self.path = Path(layout_path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"{self.path}: layout not found")
+        self.doc = layout_edit.base_doc(self.path)
+        self.progress = progress
+        self._fmu_paths = fmu_paths
+        self.n_sims = 0
+        self.sim_wall = 0.0
+        self._tmp = None
+
+    # ------------------------------------------------------------------ FMUs ----
+    @property
+    def fmu_paths(self):
+        if self._fmu_paths is None:
+            from fmus.build import build_all
+            self._fmu_paths = build_all(log=lambda m: log.info(m))
+        return self._fmu_paths
+
+    # ---------------------------------------------------------------- systems ----
+    def system(self, run, doc=None, edits=()):
+        """System of the layout (or of the derived layout ``doc``) under ``run``'s conditions."""
+        from orchestrator.layout import load_system
+        overrides = dict(run.overrides) if run is not None else {}
+        if doc is None or not doc.get("set"):
+            system = load_system(self.path, overrides or None)
+        else:
+            system = load_system(self.write_doc(doc), overrides or None)
+        if run is not None:
+            e = system.experiment
+            if not any(k in overrides for k in ("experiment.duration", "experiment.stop")):
+                e.stop = e.start + run.t[-1] + 1e-9
+            elif e.stop < e.start + run.t[-1] - 1e-9:
+                log.warning("run %s: the model stops at %.3g s, the data at %.3g s; "
+                            "the model is extended to the data", run.name, e.stop, run.t[-1])
+                e.stop = e.start + run.t[-1] + 1e-9
+            dt = float(run.t[1] - run.t[0])
+            k = max(1, int(round(dt / e.step)))
+            e.output_interval = k * e.step
+        for edit in edits:
+            edit(system)
+        return system
+
+    def write_doc(self, doc, path=None):
+        """Write a derived layout; to a temporary file unless ``path`` is given
+        (then its ``base`` is made relative to the file's folder)."""
+        from diagnosis import layout_edit
+        if path is None:
+            if self._tmp is None:
+                self._tmp = tempfile.TemporaryDirectory(prefix="webline_diagnose_")
+            self._n_tmp = getattr(self, "_n_tmp", 0) + 1
+            path = Path(self._tmp.name) / f"layout_{self._n_tmp}.yaml"
+        else:
+            doc = layout_edit.relative_to(doc, Path(path).parent)
+        text = ("# written by webline diagnose: the layout named in 'base' plus what the diagnosis added\n"
+                + yaml.safe_dump(doc, sort_keys=False, allow_unicode=True))
+        Path(path).write_text(text)
+        return Path(path)
+
+    def cleanup(self):
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def copy_doc(self):
+        return copy.deepcopy(self.doc)
+
+    # ------------------------------------------------------------- simulate ----
+    def simulate(self, run, doc=None, edits=(), label=""):
+        from orchestrator.master import simulate
+        system = self.system(run, doc, edits)
+        t0 = _time.perf_counter()
+        result = simulate(system, fmu_paths=self.fmu_paths, progress=self.progress)
+        wall = _time.perf_counter() - t0
+        self.n_sims += 1
+        self.sim_wall += wall
+        log.info("  simulated %s%s: %.3g s of line in %.1f s", run.name, f" ({label})" if label else "",
+                 run.t[-1], wall)
+        ok = getattr(result, "ok", True)
+        if not ok:
+            raise SimulationFailed(f"simulation of run {run.name}{' (' + label + ')' if label else ''} "
+                                   f"failed: {getattr(result, 'message', '')}")
+        t, cols = _columns(result)
+        out = {k: np.interp(run.t, t, v) for k, v in cols.items()}  # run time is model time
+        return Sim(system, out, wall)
+
+
+def _columns(result):
+    t = np.asarray(result.time, float)
+    cols = getattr(result, "columns", None)
+    if isinstance(cols, dict):
+        return t, {k: np.asarray(v, float) for k, v in cols.items()}
+    return t, {k: np.asarray(result[k], float) for k in cols}

@@ -1,0 +1,639 @@
+"""``webline diagnose``: where model and data differ, which unmodelled effect
+causes it, and how far the gap shrinks once that effect is in the model.
+
+Stages (each logged with its wall time):
+
+1. **runs** - read every run file and its data (:mod:`diagnosis.runs`).
+2. **nominal** - co-simulate the layout under each run's conditions.
+3. **where** - residual = measured - nominal per load cell, split into a slow
+   part (low-pass below half the slowest rotating fundamental) and a periodic
+   part; by time window (speed ramps vs steady speed) and frequency band;
+   residual spectrum peaks tagged to the rotating elements' harmonic families.
+4. **which** - every rotating element is a candidate harmonic family locked
+   to its own angle (the model's ``theta``, or the data's ``.angle``/``.pulse``
+   column; speed-scale refined from data). A greedy search takes the family
+   that explains most of the periodic residual over all fit runs, if it is
+   significant against the local noise floor, removes it, and repeats.
+   Families that explain (nearly) the same residual are indistinguishable:
+   all become candidates of one effect, ranked by how well each element's
+   model-predicted pattern across the sensors (complex gain per harmonic from
+   a sensitivity simulation) fits the measured harmonics.
+5. **estimate** - Fourier coefficients C_j, psi_j (m, rad) of the span-length
+   change: measured harmonic / model complex gain, least squares over sensors
+   and fit runs; one Gauss-Newton polish from the refined simulation.
+6. **other effects** - if a significant slow or unexplained residual remains:
+   parameter error (EA, friction, inertia, gains), sensor lag, backlash and
+   shaft compliance of each driven element, screened by simulation.
+7. **refine** - add the effects to the layout one by one
+   (``refined_layout.yaml``), re-simulate every run, gap before/after.
+8. **report** - ``report.json`` and ``report.html``.
+"""
+import copy
+import logging
+import math
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from diagnosis import candidates as cand_mod
+from diagnosis import estimate as est
+from diagnosis import layout_edit
+from diagnosis.line_model import LineModel, SimulationFailed
+from diagnosis.runs import RunError, load_run
+
+log = logging.getLogger("webline.diagnose")
+
+
+@dataclass
+class Options:
+    harmonics: int = 6               # Fourier terms per element ({32} uses 6)
+    max_effects: int = 5
+    significance: float = -8.0       # log10 of the false-alarm probability a family must beat
+    min_share: float = 0.01          # of the periodic residual energy
+    ambiguity: float = 0.85          # another family explaining this share of the best's energy is a tie
+    kappa_span: float = 0.02         # speed-scale search range (+-)
+    test_amplitude: float = 5e-5     # m, eccentricity of the sensitivity simulations
+    max_group: int = 4               # candidates simulated per ambiguous effect
+    polish: bool = True              # one Gauss-Newton pass from the refined simulation
+    other_effects: bool = True       # screen non-periodic effects when a significant residual remains
+    fmu_paths: dict = None
+    progress: bool = False
+
+
+class DiagnoseError(ValueError):
+    """Bad input to the diagnosis (layout, runs, data): exit code 2."""
+
+
+# ============================================================ per-run context ====
+@dataclass
+class RunCtx:
+    run: object
+    fit: bool
+    nominal: object = None
+    sensors: list = field(default_factory=list)   # result columns of the load cells in the data
+    meas: dict = field(default_factory=dict)
+    fs: float = 0.0
+    fc: float = 0.0                                # slow/periodic split (Hz)
+    steady: np.ndarray = None
+    mask: np.ndarray = None                        # samples used for harmonic fits
+    speed: np.ndarray = None
+    resid: dict = field(default_factory=dict)
+    periodic: dict = field(default_factory=dict)
+    floors: dict = field(default_factory=dict)
+    theta: dict = field(default_factory=dict)      # candidate key -> angle used for fits
+    theta_src: dict = field(default_factory=dict)  # candidate key -> "model" / "data angle" / "data pulse"
+    freq: dict = field(default_factory=dict)       # candidate key -> mean fundamental (Hz) over mask
+    kappa: dict = field(default_factory=dict)
+
+    @property
+    def name(self):
+        return self.run.name
+
+    @property
+    def t(self):
+        return self.run.t
+
+    @property
+    def T(self):  # duration of the fit window
+        return float(self.mask.sum()) / self.fs
+
+
+# ================================================================ the pipeline ====
+class Diagnosis:
+    def __init__(self, layout, runs, holdout=(), out=None, options=None):
+        self.layout_path = Path(layout)
+        self.run_paths = [Path(p) for p in runs]
+        self.holdout_paths = [Path(p) for p in holdout]
+        self.out = Path(out) if out else None
+        self.opt = options or Options()
+        self.timings = {}
+        self.effects = []
+        self.notes = []
+        self._data_col = {}
+
+    # ---------------------------------------------------------------- driver ----
+    def run(self):
+        t_all = _time.perf_counter()
+        try:
+            self._stage("runs", self.load)
+            self._stage("nominal", self.simulate_nominal)
+            self._stage("where", self.where)
+            self._stage("which", self.which)
+            self._stage("estimate", self.estimate)
+            if self.opt.other_effects:
+                self._stage("other effects", self.other_effects)
+            self._stage("refine", self.refine)
+        finally:
+            if hasattr(self, "model"):
+                self.model.cleanup()
+        self.timings["total"] = _time.perf_counter() - t_all
+        return self.report()
+
+    def _stage(self, name, fn):
+        log.info("stage %s ...", name)
+        t = _time.perf_counter()
+        fn()
+        self.timings[name] = _time.perf_counter() - t
+        log.info("stage %s done in %.1f s", name, self.timings[name])
+
+    # ---------------------------------------------------------------- 1 runs ----
+    def load(self):
+        from orchestrator.layout import LayoutError
+        if not self.layout_path.exists():
+            raise DiagnoseError(f"{self.layout_path}: layout not found")
+        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress)
+        self.ctx = []
+        names = set()
+        for paths, fit in ((self.run_paths, True), (self.holdout_paths, False)):
+            for p in paths:
+                try:
+                    run = load_run(p, holdout=not fit)
+                except RunError as exc:
+                    raise DiagnoseError(str(exc)) from None
+                if run.name in names:
+                    run.name = f"{run.name}_{len(names)}"
+                names.add(run.name)
+                try:
+                    system = self.model.system(run)
+                except LayoutError as exc:
+                    raise DiagnoseError(f"{p}: the layout rejects the run's conditions: {exc}") from None
+                except (ValueError, KeyError) as exc:
+                    raise DiagnoseError(f"{p}: the layout rejects the run's conditions: {exc}") from None
+                ctx = RunCtx(run, fit)
+                ctx.fs = run.fs
+                ctx.sensors = self._match_sensors(system, run, p)
+                ctx.meas = {s: run.columns[self._data_col[(run.name, s)]] for s in ctx.sensors}
+                self.ctx.append(ctx)
+                if len(system.components) and not hasattr(self, "system0"):
+                    self.system0 = system
+        if not any(c.fit for c in self.ctx):
+            raise DiagnoseError("no run to fit on")
+        self.cands = cand_mod.rotating(self.system0)
+        log.info("  %d runs (%d held out), sensors %s, %d rotating elements", len(self.ctx),
+                 sum(not c.fit for c in self.ctx), ", ".join(self.ctx[0].sensors), len(self.cands))
+
+    def _match_sensors(self, system, run, path):
+        """Load-cell result columns that the data has (as ``lc.T`` or ``lc``)."""
+        found = []
+        for lc in cand_mod.sensors(system):
+            for col in (f"{lc}.T", lc):
+                if col in run.columns:
+                    found.append(f"{lc}.T")
+                    self._data_col[(run.name, f"{lc}.T")] = col
+                    break
+        if not found:
+            lcs = ", ".join(f"{lc}.T" for lc in cand_mod.sensors(system)) or "(the layout has no load cell)"
+            raise DiagnoseError(f"{path}: the data has no load-cell column; expected one of {lcs} "
+                                f"(columns: {', '.join(sorted(run.columns))})")
+        return found
+
+    def fit_ctx(self):
+        return [c for c in self.ctx if c.fit]
+
+    # ------------------------------------------------------------- 2 nominal ----
+    def simulate_nominal(self):
+        for c in self.ctx:
+            try:
+                c.nominal = self.model.simulate(c.run, label="nominal")
+            except SimulationFailed as exc:
+                raise DiagnoseError(str(exc)) from None
+            self._prepare(c)
+
+    def _prepare(self, c):
+        cols = c.nominal.columns
+        sp = cand_mod.line_speed_column(c.nominal.system, cols)
+        c.speed = cols[sp] if sp else np.ones_like(c.t)
+        c.steady = est.steady_mask(c.speed, c.fs)
+        # skip the first second (start-up of model and line) in any fit
+        settle = c.t >= c.t[0] + min(1.0, 0.1 * c.run.duration)
+        c.mask = (c.steady & settle) if (c.steady & settle).mean() >= 0.3 else settle
+        fmin = np.inf
+        for k in self.cands:
+            th, src = self._angle(c, k)
+            c.theta[k.key], c.theta_src[k.key] = th, src
+            f = self._mean_freq(c, th)
+            c.freq[k.key] = f
+            if f > 0:
+                fmin = min(fmin, f)
+        c.fc = float(np.clip(0.5 * fmin if np.isfinite(fmin) else 0.5, 0.02, 2.0))
+        for s in c.sensors:
+            r = c.meas[s] - cols[s]
+            c.resid[s] = r
+            c.periodic[s] = est.split_slow_periodic(r, c.fs, c.fc)[1]
+            c.floors[s] = est.NoiseFloor(c.periodic[s][c.mask], c.fs)
+
+    def _angle(self, c, k):
+        """Angle of candidate ``k`` in run ``c``: from the data if it has one, else the model's."""
+        run = c.run
+        for name in (k.element, k.component):
+            if f"{name}.angle" in run.columns:
+                return np.unwrap(run.columns[f"{name}.angle"]), "data angle"
+        for name in (k.element, k.component):
+            if f"{name}.pulse" in run.columns:
+                th = angle_from_pulse(run.t, run.columns[f"{name}.pulse"], c.nominal.columns.get(k.theta))
+                if th is not None:
+                    return th, "data pulse"
+        th = c.nominal.columns.get(k.theta)
+        if th is None:
+            return np.zeros_like(c.t), "none"
+        return th, "model"
+
+    def _mean_freq(self, c, th):
+        m = c.mask
+        if m.sum() < 2:
+            return 0.0
+        tt, a = c.t[m], th[m]
+        return float(abs(a[-1] - a[0]) / (2 * math.pi) / max(tt[-1] - tt[0], 1e-9))
+
+    # --------------------------------------------------------------- 3 where ----
+    def where(self):
+        from diagnosis import spectra
+        self.where_report = {}
+        for c in self.ctx:
+            fams = {k.element: c.freq[k.key] for k in self.cands if c.freq[k.key] > 0}
+            fmax_rot = max(fams.values()) if fams else 5.0
+            f_hi = min(0.45 * c.fs, (self.opt.harmonics + 0.5) * fmax_rot)
+            wins = self._windows(c)
+            per = {}
+            for s in c.sensors:
+                r = c.resid[s]
+                slow = r - c.periodic[s]
+                per[s] = {
+                    "rms": _rms(r), "mean": float(np.mean(r)),
+                    "slow_rms": _rms(slow), "periodic_rms": _rms(c.periodic[s]),
+                    "slow_share": _share(slow, r), "periodic_share": _share(c.periodic[s], r),
+                    "windows": [dict(w, rms=_rms(r[w["_m"]]), mean=float(np.mean(r[w["_m"]])),
+                                     slow_rms=_rms(slow[w["_m"]]), periodic_rms=_rms(c.periodic[s][w["_m"]]))
+                                for w in wins],
+                    "bands": _bands(r, c.fs, [("slow", 0.0, c.fc), ("rotating", c.fc, f_hi),
+                                              ("high", f_hi, 0.5 * c.fs)]),
+                }
+                # residual spectrum peaks over the fit window, tagged to the families
+                x = c.periodic[s][c.mask]
+                f, amp = spectra.amplitude_spectrum(x, c.fs)
+                pk = spectra.spectral_peaks(f, amp, fmin=max(c.fc, 2 * c.fs / len(x)), fmax=f_hi)
+                res = spectra.frequency_resolution(len(x), c.fs)
+                tags = spectra.tag_peaks(pk.frequency[:20], fams, res, max_harmonic=self.opt.harmonics)
+                per[s]["peaks"] = [
+                    {"frequency_hz": float(tg.frequency), "amplitude": float(a), "snr": float(q),
+                     "status": tg.status, "element": tg.family, "order": tg.harmonic,
+                     "candidates": [{"element": n, "order": int(j)} for n, j in tg.candidates]}
+                    for tg, a, q in zip(tags, pk.amplitude[:20], pk.snr[:20])]
+                per[s]["_spectrum"] = (f, amp)
+            for w in wins:
+                w.pop("_m", None)
+            for s in c.sensors:
+                for w in per[s]["windows"]:
+                    w.pop("_m", None)
+            self.where_report[c.name] = {
+                "holdout": not c.fit, "fs_hz": c.fs, "duration_s": c.run.duration,
+                "slow_cutoff_hz": c.fc, "fit_window_s": c.T,
+                "windows": [{k: v for k, v in w.items()} for w in wins],
+                "fundamentals_hz": {k.element: c.freq[k.key] for k in self.cands},
+                "angle_source": {k.element: c.theta_src[k.key] for k in self.cands},
+                "sensors": per,
+            }
+
+    def _windows(self, c):
+        """Steady-speed and ramp windows of a run (times and masks)."""
+        out = []
+        for a, b in est.windows_of(c.steady, c.t):
+            m = (c.t >= a) & (c.t <= b)
+            out.append({"kind": "steady", "start_s": a, "stop_s": b, "speed_m_s": float(np.mean(c.speed[m])),
+                        "_m": m})
+        for a, b in est.windows_of(~c.steady, c.t):
+            m = (c.t >= a) & (c.t <= b)
+            if m.sum() < 3:
+                continue
+            out.append({"kind": "ramp" if np.ptp(c.speed[m]) > 0.02 * max(np.max(np.abs(c.speed)), 1e-9)
+                        else "start-up", "start_s": a, "stop_s": b,
+                        "speed_m_s": float(np.mean(c.speed[m])), "_m": m})
+        out.sort(key=lambda w: w["start_s"])
+        return out
+
+    # --------------------------------------------------------------- 4 which ----
+    def orders_for(self, c, key):
+        f = c.freq.get(key, 0.0)
+        return [j for j in range(1, self.opt.harmonics + 1)
+                if j * f >= 1.5 * c.fc and j * f <= 0.4 * c.fs]
+
+    def _family_fit(self, c, key, resid, theta=None):
+        """(Y per sensor, explained energy per sensor, z sum, n harmonics)."""
+        orders = self.orders_for(c, key)
+        if not orders:
+            return None
+        th = c.theta[key] if theta is None else theta
+        m = c.mask
+        out = {"orders": orders, "Y": {}, "E": {}, "z": 0.0, "n": 0}
+        freqs = np.array(orders) * c.freq[key]
+        for s in c.sensors:
+            Y = est.fit_harmonics(resid[s], th, orders, m)
+            fitted = est.harmonic_signal(th[m], Y, orders)
+            out["Y"][s], out["E"][s] = Y, float(np.sum(fitted ** 2))
+            out["z"] += float(np.sum(est.harmonic_z(Y, freqs, c.floors[s], c.T)))
+            out["n"] += len(orders)
+        return out
+
+    def which(self):
+        fit = self.fit_ctx()
+        # speed-scale refinement of every family's angle, per fit run (model angles only)
+        for c in fit:
+            for k in self.cands:
+                orders = self.orders_for(c, k.key)
+                c.kappa[k.key] = 0.0
+                if not orders or c.theta_src[k.key] != "model" or self.opt.kappa_span <= 0:
+                    continue
+                kap = self._refine_kappa(c, k, orders)
+                c.kappa[k.key] = kap
+        resid = {c.name: {s: c.periodic[s].copy() for s in c.sensors} for c in fit}
+        total = sum(float(np.sum(c.periodic[s][c.mask] ** 2)) for c in fit for s in c.sensors)
+        self.total_periodic = total
+        self.total_resid = sum(float(np.sum(c.resid[s][c.mask] ** 2)) for c in fit for s in c.sensors)
+        remaining = list(self.cands)
+        self.screen_log = []
+        n_tests = max(1, len(self.cands))
+        for it in range(self.opt.max_effects):
+            scores = []
+            for k in remaining:
+                E, z, n, fits = 0.0, 0.0, 0, {}
+                for c in fit:
+                    th = self._theta_refined(c, k)
+                    ff = self._family_fit(c, k.key, resid[c.name], th)
+                    if ff is None:
+                        continue
+                    fits[c.name] = ff
+                    E += sum(ff["E"].values())
+                    z += ff["z"]
+                    n += ff["n"]
+                if n == 0:
+                    continue
+                logp = est.gamma_log10_sf(z, n) + math.log10(n_tests)
+                scores.append({"cand": k, "E": E, "share": E / total if total > 0 else 0.0,
+                               "logp": logp, "fits": fits, "z": z, "n": n})
+            scores.sort(key=lambda d: -d["E"])
+            self.screen_log.append([{"element": d["cand"].element, "kind": d["cand"].kind,
+                                     "share": d["share"], "log10_p": d["logp"]} for d in scores])
+            sig = [d for d in scores if d["logp"] < self.opt.significance and d["share"] >= self.opt.min_share]
+            if not sig:
+                break
+            best = sig[0]
+            group = [best] + [d for d in scores if d is not best and d["E"] >= self.opt.ambiguity * best["E"]
+                              and d["logp"] < self.opt.significance]
+            group = group[:max(1, self.opt.max_group)]
+            eff = {"group": group, "best": best, "resid_before": copy.deepcopy(resid)}
+            self.effects.append(eff)
+            log.info("  effect %d: %s (%s), share %.1f %%, log10 p %.1f%s", len(self.effects),
+                     best["cand"].element, best["cand"].kind, 100 * best["share"], best["logp"],
+                     "; tied with " + ", ".join(d["cand"].element for d in group[1:]) if len(group) > 1 else "")
+            # remove the best family's fit from the residual
+            for c in fit:
+                ff = best["fits"].get(c.name)
+                if ff is None:
+                    continue
+                th = self._theta_refined(c, best["cand"])
+                for s in c.sensors:
+                    resid[c.name][s] = resid[c.name][s] - est.harmonic_signal(th, ff["Y"][s], ff["orders"])
+            remaining = [k for k in remaining if all(k is not d["cand"] for d in group)]
+        self.resid_after_periodic = resid
+        if not self.effects:
+            log.info("  no significant periodic family: the periodic residual is noise")
+
+    def _refine_kappa(self, c, k, orders):
+        """Speed scale of family k in run c (0 unless clearly better), on a decimated signal."""
+        m = c.mask
+        f_top = max(orders) * c.freq[k.key]
+        q = max(1, int(c.fs / max(8.0 * f_top, 20.0)))
+        Y = np.column_stack([est.lowpass(c.periodic[s], c.fs, 0.4 * c.fs / q)[m][::q] for s in c.sensors])
+        th = c.theta[k.key][m][::q]
+        ref = 0.5 * (th[0] + th[-1])
+        revs = abs(th[-1] - th[0]) / (2 * math.pi)
+        if revs < 3:
+            return 0.0
+        hmax = max(orders)
+        step = 0.25 / (hmax * revs)
+        n = int(min(200, math.ceil(self.opt.kappa_span / step)))
+        grid = np.linspace(-self.opt.kappa_span, self.opt.kappa_span, 2 * n + 1)
+
+        def energy(kap):
+            A = est.harmonic_basis(est.scaled_angle(th, kap, ref), orders)
+            coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
+            return float(np.sum((A @ coef) ** 2))
+
+        e = np.array([energy(g) for g in grid])
+        i = int(np.argmax(e))
+        e0 = energy(0.0)
+        kap = float(grid[i])
+        if 0 < i < len(grid) - 1:
+            a, b, cc = e[i - 1], e[i], e[i + 1]
+            den = a - 2 * b + cc
+            if den < 0:
+                kap += 0.5 * (a - cc) / den * (grid[1] - grid[0])
+        # keep the model's angle unless the refined one explains clearly more
+        if energy(kap) < 1.2 * e0 + 1e-30 or abs(kap) < 0.5 / (hmax * revs):
+            return 0.0
+        return kap
+
+    def _theta_refined(self, c, k):
+        th = c.theta[k.key]
+        kap = c.kappa.get(k.key, 0.0)
+        if kap == 0.0:
+            return th
+        m = c.mask
+        ref = 0.5 * (th[m][0] + th[m][-1])
+        return est.scaled_angle(th, kap, ref)
+
+    # ------------------------------------------------------------ 5 estimate ----
+    def estimate(self):
+        fit = self.fit_ctx()
+        self.final_effects = []
+        for idx, eff in enumerate(self.effects):
+            ranked = []
+            for d in eff["group"]:
+                k = d["cand"]
+                G, M, W = self._gains_and_measured(k, eff, d, fit)
+                if G is None:
+                    continue
+                X, misfit = est.solve_fourier(M, G, W)
+                ranked.append({"score": d, "cand": k, "G": G, "M": M, "W": W, "X": X, "misfit": misfit})
+            if not ranked:
+                continue
+            # best pattern fit first; ties (one sensor, equal misfit) by explained energy
+            ranked.sort(key=lambda r: (round(r["misfit"], 3), -r["score"]["E"]))
+            self.final_effects.append({"ranked": ranked, "eff": eff})
+            b = ranked[0]
+            log.info("  %s: C = %s um, misfit %.3f", b["cand"].element,
+                     ", ".join(f"{1e6 * abs(x):.1f}" for x in b["X"]), b["misfit"])
+
+    def _gains_and_measured(self, k, eff, d, fit):
+        """Complex gains G[(run, sensor), order] from a sensitivity simulation and
+        the measured harmonics M (same shape) of the residual the effect was found in."""
+        H = self.opt.harmonics
+        a0 = self.opt.test_amplitude
+        Xt = np.full(H, a0, complex)
+        Gs, Ms, Ws = [], [], []
+        for c in fit:
+            orders = self.orders_for(c, k.key)
+            if not orders:
+                continue
+            doc = layout_edit.with_fourier(self.model.copy_doc(), k, np.full(H, a0), np.zeros(H))
+            try:
+                sim = self.model.simulate(c.run, doc=doc, label=f"sensitivity {k.element}")
+            except SimulationFailed as exc:
+                log.warning("  %s", exc)
+                return None, None, None
+            th_sim = sim.columns.get(k.theta, c.theta[k.key])
+            th_meas = self._theta_refined(c, k)
+            resid = eff["resid_before"][c.name]
+            for s in c.sensors:
+                delta = sim.columns[s] - c.nominal.columns[s]
+                delta = est.split_slow_periodic(delta, c.fs, c.fc)[1]
+                g = np.zeros(H, complex)
+                g_ord = est.complex_gain(delta, th_sim, orders, Xt[[j - 1 for j in orders]], c.mask)
+                m = np.zeros(H, complex)
+                m_ord = est.fit_harmonics(resid[s], th_meas, orders, c.mask)
+                for i, j in enumerate(orders):
+                    g[j - 1], m[j - 1] = g_ord[i], m_ord[i]
+                Gs.append(g)
+                Ms.append(m)
+                Ws.append(1.0 / max(float(np.median(c.floors[s].S)), 1e-300))
+            d.setdefault("sens", {})[c.name] = sim
+        if not Gs:
+            return None, None, None
+        return np.array(Gs), np.array(Ms), np.array(Ws)
+
+    # ------------------------------------------------------- 6 other effects ----
+    def other_effects(self):
+        try:
+            from diagnosis import others
+        except ImportError:
+            self.other = []
+            return
+        self.other = others.screen(self)
+
+    # -------------------------------------------------------------- 7 refine ----
+    def refine(self):
+        """Add the effects one by one to the layout, re-simulate, measure the gap."""
+        from diagnosis import metrics_ext as mx
+        self.steps = []
+        doc = self.model.copy_doc()
+        self.steps.append({"added": None, "sims": {c.name: c.nominal for c in self.ctx}})
+        for i, fe in enumerate(self.final_effects):
+            b = fe["ranked"][0]
+            X = b["X"]
+            if self.opt.polish:
+                X = self._polish(doc, b, X)
+                b["X"] = X
+            doc = layout_edit.with_fourier(doc, b["cand"], np.abs(X), np.angle(X), add=True)
+            sims = {}
+            for c in self.ctx:
+                sims[c.name] = self.model.simulate(c.run, doc=doc, label=f"refined +{b['cand'].element}")
+            self.steps.append({"added": b["cand"].element, "kind": b["cand"].kind, "sims": sims})
+        for o in getattr(self, "other", []) or []:
+            doc = o["apply_doc"](doc)
+            sims = {c.name: self.model.simulate(c.run, doc=doc, label=f"refined +{o['element']} {o['kind']}")
+                    for c in self.ctx}
+            self.steps.append({"added": o["element"], "kind": o["kind"], "sims": sims})
+        self.refined_doc = doc
+        if self.out:
+            self.out.mkdir(parents=True, exist_ok=True)
+            self.model.write_doc(doc, self.out / "refined_layout.yaml")
+        # metrics per step, run and sensor
+        for st in self.steps:
+            st["metrics"] = {}
+            for c in self.ctx:
+                sim = st["sims"][c.name]
+                st["metrics"][c.name] = {s: mx.gap_metrics(c.t, c.meas[s], sim.columns[s], c.fs, c.mask)
+                                         for s in c.sensors}
+
+    def _polish(self, doc, b, X):
+        """One Gauss-Newton step: simulate with X, fit the remaining harmonics, correct X."""
+        k = b["cand"]
+        fit = self.fit_ctx()
+        trial = layout_edit.with_fourier(doc, k, np.abs(X), np.angle(X), add=True)
+        H = self.opt.harmonics
+        Ms, before = [], 0.0
+        for c in fit:
+            orders = self.orders_for(c, k.key)
+            if not orders:
+                continue
+            sim = self.model.simulate(c.run, doc=trial, label=f"polish {k.element}")
+            th = self._theta_refined(c, k)
+            for s in c.sensors:
+                r = est.split_slow_periodic(c.meas[s] - sim.columns[s], c.fs, c.fc)[1]
+                m = np.zeros(H, complex)
+                for i, j in enumerate(orders):
+                    pass
+                m_ord = est.fit_harmonics(r, th, orders, c.mask)
+                for i, j in enumerate(orders):
+                    m[j - 1] = m_ord[i]
+                Ms.append(m)
+        if not Ms:
+            return X
+        dX, _ = est.solve_fourier(np.array(Ms), b["G"], b["W"])
+        before = float(np.sum(np.abs(b["M"]) ** 2))
+        after = float(np.sum(np.abs(np.array(Ms)) ** 2))
+        log.info("  polish %s: remaining harmonic energy %.2g %% of measured", k.element,
+                 100 * after / before if before else 0.0)
+        return X + dX
+
+    # -------------------------------------------------------------- 8 report ----
+    def report(self):
+        from diagnosis import report as rep
+        return rep.build(self)
+
+
+# ================================================================== helpers ====
+def angle_from_pulse(t, pulse, theta_model=None):
+    """Angle from a once-per-revolution pulse: rising edges at theta = 2 pi k,
+    linear in between (extrapolated at the ends with the nearest revolution's rate)."""
+    p = np.asarray(pulse, float)
+    thr = 0.5 * (np.min(p) + np.max(p))
+    hi = p > thr
+    edges = np.flatnonzero(~hi[:-1] & hi[1:]) + 1
+    if len(edges) < 3:
+        return None
+    # sub-sample edge time by linear interpolation
+    te = t[edges - 1] + (thr - p[edges - 1]) / (p[edges] - p[edges - 1]) * (t[edges] - t[edges - 1])
+    k = np.arange(len(te)) * 2 * math.pi
+    th = np.interp(t, te, k)
+    r0 = (k[1] - k[0]) / (te[1] - te[0])
+    r1 = (k[-1] - k[-2]) / (te[-1] - te[-2])
+    th = np.where(t < te[0], k[0] + r0 * (t - te[0]), th)
+    th = np.where(t > te[-1], k[-1] + r1 * (t - te[-1]), th)
+    return th
+
+
+def _rms(x):
+    x = np.asarray(x, float)
+    return float(np.sqrt(np.mean(x ** 2))) if x.size else 0.0
+
+
+def _share(part, whole):
+    w = float(np.sum(np.asarray(whole) ** 2))
+    return float(np.sum(np.asarray(part) ** 2) / w) if w > 0 else 0.0
+
+
+def _bands(x, fs, bands):
+    """RMS and energy share of ``x`` per frequency band (FFT, mean included in the first band)."""
+    x = np.asarray(x, float)
+    X = np.fft.rfft(x)
+    f = np.fft.rfftfreq(len(x), 1.0 / fs)
+    p = np.abs(X) ** 2
+    p[1:] *= 2.0
+    if len(x) % 2 == 0:
+        p[-1] /= 2.0
+    tot = float(np.sum(p))
+    out = []
+    for name, lo, hi in bands:
+        sel = (f >= lo) & (f < hi) if name != bands[-1][0] else (f >= lo)
+        e = float(np.sum(p[sel]))
+        out.append({"band": name, "f_lo_hz": float(lo), "f_hi_hz": float(hi),
+                    "rms": float(np.sqrt(e) / len(x)), "share": e / tot if tot > 0 else 0.0})
+    return out
+
+
+def diagnose(layout, runs, holdout=(), out=None, options=None):
+    """Run the diagnosis; returns the report (dict). Raises :class:`DiagnoseError` on bad input."""
+    return Diagnosis(layout, runs, holdout, out, options).run()

@@ -1,0 +1,428 @@
+"""``report.json`` and ``report.html`` of ``webline diagnose`` (schema in docs/diagnose.md)."""
+import base64
+import html
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+SCHEMA = "webline-diagnose-1"
+
+
+# ===================================================================== JSON ====
+def build(d):
+    """The report dict of a finished :class:`diagnosis.pipeline.Diagnosis`; writes files if ``d.out``."""
+    rep = {
+        "schema": SCHEMA,
+        "layout": str(d.layout_path),
+        "runs": [{"name": c.name, "file": str(c.run.path), "data": str(c.run.data_path),
+                  "holdout": not c.fit, "duration_s": c.run.duration, "fs_hz": c.fs,
+                  "sensors": c.sensors, "conditions": c.run.overrides} for c in d.ctx],
+        "effects": _effects(d),
+        "gap": {},
+        "holdout": {},
+        "where": _where(d),
+        "steps": [],
+        "screening": {"periodic": getattr(d, "screen_log", []),
+                      "other": getattr(d, "other_log", [])},
+        "notes": list(d.notes),
+        "timings_s": d.timings,
+        "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall},
+    }
+    fit = [c for c in d.ctx if c.fit]
+    hold = [c for c in d.ctx if not c.fit]
+    first, last = d.steps[0], d.steps[-1]
+    sensors = list(dict.fromkeys(s for c in d.ctx for s in c.sensors))
+    rep["gap"] = {s: {"nominal": _agg(first, fit, s), "refined": _agg(last, fit, s),
+                      "by_run": {c.name: {"nominal": first["metrics"][c.name][s],
+                                          "refined": last["metrics"][c.name][s]}
+                                 for c in d.ctx if s in c.sensors}}
+                  for s in sensors}
+    rep["holdout"] = {
+        "fit_runs": [c.name for c in fit],
+        "holdout_runs": [c.name for c in hold],
+        "in_sample": {s: {"nominal": _agg(first, fit, s), "refined": _agg(last, fit, s)} for s in sensors},
+        "out_of_sample": ({s: {"nominal": _agg(first, hold, s), "refined": _agg(last, hold, s)}
+                           for s in sensors} if hold else None),
+    }
+    prev = None
+    for st in d.steps:
+        row = {"added": st.get("added"), "kind": st.get("kind"),
+               "in_sample": {s: _agg(st, fit, s) for s in sensors},
+               "out_of_sample": {s: _agg(st, hold, s) for s in sensors} if hold else None}
+        if prev is not None:
+            row["nrmse_change_in_sample"] = {
+                s: _sub(row["in_sample"][s], prev["in_sample"][s], "nrmse") for s in sensors}
+        rep["steps"].append(row)
+        prev = row
+    rep["remaining_peaks"] = _remaining(d)
+    rep["verdict"] = _verdict(rep)
+    if d.out:
+        out = Path(d.out)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.json").write_text(json.dumps(_clean(rep), indent=1, allow_nan=False))
+        (out / "report.html").write_text(html_report(d, rep))
+    return _clean(rep)
+
+
+def _sub(a, b, key):
+    if a is None or b is None or a.get(key) is None or b.get(key) is None:
+        return None
+    return a[key] - b[key]
+
+
+def _agg(step, ctxs, s):
+    """Metrics of sensor ``s`` over several runs: nrmse/fit over the joined
+    records, L1 summed, L2 root-sum-square, Linf max, spectral error mean."""
+    ms = [(c, step["metrics"][c.name][s]) for c in ctxs if s in c.sensors]
+    if not ms:
+        return None
+    if len(ms) == 1:
+        return dict(ms[0][1])
+    e2 = sum((m["nrmse"] ** 2) * _var_norm2(c, s) for c, m in ms)
+    d2 = sum(_var_norm2(c, s) for c, m in ms)
+    nrmse = math.sqrt(e2 / d2) if d2 > 0 else float("inf")
+    spe = [m["spectral_peak_error"] for _, m in ms if m.get("spectral_peak_error") is not None]
+    return {"nrmse": nrmse, "fit_percent": 100 * (1 - nrmse),
+            "l1": sum(m["l1"] for _, m in ms), "l2": math.sqrt(sum(m["l2"] ** 2 for _, m in ms)),
+            "linf": max(m["linf"] for _, m in ms),
+            "rms": math.sqrt(sum(m["rms"] ** 2 * len(c.t) for c, m in ms) / sum(len(c.t) for c, _ in ms)),
+            "mean_error": sum(m["mean_error"] * len(c.t) for c, m in ms) / sum(len(c.t) for c, _ in ms),
+            "spectral_peak_error": float(np.mean(spe)) if spe else None}
+
+
+def _var_norm2(c, s):
+    y = c.meas[s]
+    return float(np.sum((y - np.mean(y)) ** 2))
+
+
+def _effects(d):
+    out = []
+    for fe in getattr(d, "final_effects", []):
+        ranked = fe["ranked"]
+        b = ranked[0]
+        k = b["cand"]
+        score = b["score"]
+        fit = [c for c in d.ctx if c.fit]
+        fund = {c.name: c.freq[k.key] * (1 + c.kappa.get(k.key, 0.0)) for c in d.ctx}
+        fund_fit = [fund[c.name] for c in fit if fund[c.name] > 0]
+        X = b["X"]
+        conf, why = _confidence(d, ranked)
+        eff = {
+            "element": k.element,
+            "component": k.component,
+            "kind": k.kind,
+            "candidates": [_cand_entry(d, r) for r in ranked],
+            "fundamental_hz": float(np.mean(fund_fit)) if fund_fit else None,
+            "fundamental_by_run_hz": fund,
+            "speed_scale_by_run": {c.name: c.kappa.get(k.key, 0.0) for c in fit},
+            "harmonics": [{"order": j + 1, "amplitude": float(abs(X[j])), "phase": float(np.angle(X[j]))}
+                          for j in range(len(X)) if abs(X[j]) > 0],
+            "harmonics_unit": {"amplitude": "m", "phase": "rad"},
+            "explained_share": score["share"],
+            "explained_share_of_residual": score["E"] / d.total_resid if d.total_resid > 0 else 0.0,
+            "confidence": conf,
+            "confidence_basis": why,
+            "log10_p": score["logp"],
+            "pattern_misfit": b["misfit"],
+            "angle_source": {c.name: c.theta_src[k.key] for c in d.ctx},
+            "tension_harmonics": _tension_harmonics(d, b),
+        }
+        out.append(eff)
+    for o in getattr(d, "other", []) or []:
+        out.append({k: v for k, v in o.items() if not callable(v) and not k.startswith("_")})
+    return out
+
+
+def _cand_entry(d, r):
+    k = r["cand"]
+    return {"element": k.element, "component": k.component, "kind": k.kind,
+            "explained_share": r["score"]["share"], "pattern_misfit": r["misfit"],
+            "log10_p": r["score"]["logp"],
+            "fundamental_hz": float(np.mean([c.freq[k.key] for c in d.ctx if c.fit]))}
+
+
+def _confidence(d, ranked):
+    """Confidence in [0, 1]: significance x uniqueness among the candidates.
+
+    Significance saturates 6 decades beyond the threshold. Uniqueness is 1 for
+    a single candidate, else the relative gap between the best and the second
+    pattern misfit (1/n when the sensors cannot tell them apart)."""
+    b = ranked[0]
+    thr = d.opt.significance
+    sig = float(np.clip((thr - b["score"]["logp"]) / 6.0, 0.0, 1.0))
+    sig = 0.5 + 0.5 * sig
+    if len(ranked) == 1:
+        uniq, why = 1.0, "single consistent element"
+    else:
+        m1, m2 = ranked[0]["misfit"], ranked[1]["misfit"]
+        if m2 - m1 < 0.02:
+            uniq = 1.0 / len(ranked)
+            why = (f"{len(ranked)} elements turn at the same frequency and the sensors do not "
+                   f"tell their patterns apart")
+        else:
+            uniq = float(np.clip((m2 - m1) / max(m2, 1e-9), 0.0, 1.0))
+            uniq = max(uniq, 1.0 / len(ranked))
+            why = (f"{len(ranked)} elements consistent in frequency; ranked by the pattern across "
+                   f"sensors (misfit {m1:.3f} vs {m2:.3f})")
+    return float(sig * uniq), why
+
+
+def _tension_harmonics(d, b):
+    out = {}
+    i = 0
+    for c in d.ctx:
+        if not c.fit or not d.orders_for(c, b["cand"].key):
+            continue
+        out[c.name] = {}
+        for s in c.sensors:
+            M = b["M"][i]
+            G = b["G"][i]
+            out[c.name][s] = [{"order": j + 1, "amplitude_N": float(abs(M[j])), "phase_rad": float(np.angle(M[j])),
+                               "gain_N_per_m": float(abs(G[j])), "gain_phase_rad": float(np.angle(G[j]))}
+                              for j in range(len(M)) if abs(M[j]) > 0]
+            i += 1
+    return out
+
+
+def _where(d):
+    out = {}
+    for name, w in d.where_report.items():
+        w = json.loads(json.dumps(w, default=_drop))
+        out[name] = w
+    return out
+
+
+def _drop(o):
+    if isinstance(o, np.ndarray):
+        return None
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, tuple):
+        return None
+    return str(o)
+
+
+def _remaining(d):
+    """Peaks left in the refined residual, tagged, and whether each stays at the
+    same frequency across runs (not a shaft whose speed or radius changed) or moves."""
+    from diagnosis import spectra
+    last = d.steps[-1]
+    out = {}
+    for c in d.ctx:
+        sim = last["sims"][c.name]
+        fams = {k.element: c.freq[k.key] for k in d.cands if c.freq[k.key] > 0}
+        out[c.name] = {}
+        for s in c.sensors:
+            from diagnosis.estimate import split_slow_periodic
+            r = split_slow_periodic(c.meas[s] - sim.columns[s], c.fs, c.fc)[1][c.mask]
+            f, a = spectra.amplitude_spectrum(r, c.fs)
+            pk = spectra.spectral_peaks(f, a, fmin=max(c.fc, 2 * c.fs / len(r)))
+            res = spectra.frequency_resolution(len(r), c.fs)
+            tags = spectra.tag_peaks(pk.frequency[:10], fams, res, max_harmonic=d.opt.harmonics)
+            out[c.name][s] = [{"frequency_hz": tg.frequency, "amplitude": float(am), "status": tg.status,
+                               "element": tg.family, "order": tg.harmonic} for tg, am in zip(tags, pk.amplitude[:10])]
+    # across runs: does a peak frequency recur in every run?
+    runs = list(out)
+    if len(runs) > 1:
+        for rname in runs:
+            for s, peaks in out[rname].items():
+                for p in peaks:
+                    others = [min((abs(q["frequency_hz"] - p["frequency_hz"]) for q in out[o].get(s, [])),
+                                  default=np.inf) for o in runs if o != rname]
+                    p["same_frequency_in_other_runs"] = bool(all(x < 0.02 * p["frequency_hz"] + 0.05 for x in others))
+    return out
+
+
+def _verdict(rep):
+    effs = rep["effects"]
+    if not effs:
+        return "no unmodelled effect found: the residual is noise at the level the data can resolve"
+    parts = []
+    for e in effs:
+        c = ", ".join(x["element"] for x in e["candidates"]) if len(e.get("candidates", [])) > 1 else e["element"]
+        f = e.get("fundamental_hz")
+        parts.append(f"{e['kind']} of {c}" + (f" (f = {f:.3g} Hz)" if f else "")
+                     + f", explains {100 * e['explained_share']:.0f} % of the periodic residual")
+    g = []
+    for s, v in rep["gap"].items():
+        if v["nominal"] and v["refined"]:
+            g.append(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}")
+    return "; ".join(parts) + ". " + "; ".join(g)
+
+
+def _clean(o):
+    """JSON-safe copy: numpy scalars to Python, non-finite floats to None."""
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items() if not k.startswith("_")} if all(
+            isinstance(k, str) for k in o) else {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _clean(o.tolist())
+    if isinstance(o, (np.floating, float)):
+        v = float(o)
+        return v if math.isfinite(v) else None
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, complex):
+        return {"re": o.real, "im": o.imag}
+    return o
+
+
+# ===================================================================== HTML ====
+def _png(fig):
+    import matplotlib.pyplot as plt
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+
+
+def _fmt(v, nd=3):
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return "-"
+        return f"{v:.{nd}g}"
+    return html.escape(str(v))
+
+
+def html_report(d, rep):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from diagnosis import spectra
+    from diagnosis.estimate import split_slow_periodic
+
+    e = html.escape
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>webline diagnose</title>"
+             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}"
+             "table{border-collapse:collapse;margin:8px 0}td,th{border:1px solid #bbb;padding:3px 6px;"
+             "font-size:13px;text-align:right}th{background:#eee}td.l{text-align:left}"
+             "img{max-width:100%}</style></head><body>",
+             f"<h1>webline diagnose</h1><p>Layout <code>{e(rep['layout'])}</code>; "
+             f"runs: {e(', '.join(r['name'] + (' (held out)' if r['holdout'] else '') for r in rep['runs']))}</p>",
+             f"<p><b>{e(rep['verdict'])}</b></p>"]
+    # effects
+    parts.append("<h2>Effects</h2>")
+    if not rep["effects"]:
+        parts.append("<p>No unmodelled effect: the residual is noise.</p>")
+    else:
+        parts.append("<table><tr><th>#</th><th>element</th><th>kind</th><th>candidates (best first)</th>"
+                     "<th>f (Hz)</th><th>share</th><th>confidence</th><th>C<sub>j</sub> (&micro;m)</th></tr>")
+        for i, ef in enumerate(rep["effects"], 1):
+            cands = ", ".join(f"{c['element']} (misfit {_fmt(c.get('pattern_misfit'))})" for c in ef.get("candidates", []))
+            C = ", ".join(f"{1e6 * h['amplitude']:.1f}" for h in ef.get("harmonics", []))
+            parts.append(f"<tr><td>{i}</td><td class=l>{e(ef['element'])}</td><td class=l>{e(ef['kind'])}</td>"
+                         f"<td class=l>{e(cands)}</td><td>{_fmt(ef.get('fundamental_hz'))}</td>"
+                         f"<td>{_fmt(100 * ef['explained_share'], 3)} %</td><td>{_fmt(ef['confidence'], 2)}</td>"
+                         f"<td class=l>{e(C)}</td></tr>")
+        parts.append("</table>")
+    # gap table
+    parts.append("<h2>Gap before / after</h2><table><tr><th>sensor</th><th>runs</th><th>model</th>"
+                 "<th>NRMSE</th><th>fit %</th><th>L1 (N s)</th><th>L2 (N s<sup>1/2</sup>)</th>"
+                 "<th>L&infin; (N)</th><th>spectral peak err</th></tr>")
+    for label, key in (("fit", "in_sample"), ("held out", "out_of_sample")):
+        block = rep["holdout"].get(key)
+        if not block:
+            continue
+        for s, v in block.items():
+            for m in ("nominal", "refined"):
+                g = v[m]
+                if g is None:
+                    continue
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{label}</td><td class=l>{m}</td>"
+                             f"<td>{_fmt(g['nrmse'])}</td><td>{_fmt(g['fit_percent'])}</td><td>{_fmt(g['l1'])}</td>"
+                             f"<td>{_fmt(g['l2'])}</td><td>{_fmt(g['linf'])}</td>"
+                             f"<td>{_fmt(g.get('spectral_peak_error'))}</td></tr>")
+    parts.append("</table>")
+    if len(rep["steps"]) > 2:
+        parts.append("<h3>Per effect added (fit runs, cumulative)</h3><table><tr><th>step</th><th>sensor</th>"
+                     "<th>NRMSE</th><th>fit %</th></tr>")
+        for st in rep["steps"]:
+            for s, g in st["in_sample"].items():
+                if g:
+                    parts.append(f"<tr><td class=l>{e(str(st['added'] or 'nominal'))}</td><td class=l>{e(s)}</td>"
+                                 f"<td>{_fmt(g['nrmse'])}</td><td>{_fmt(g['fit_percent'])}</td></tr>")
+        parts.append("</table>")
+    # where
+    parts.append("<h2>Where model and data differ</h2>")
+    for rname, w in rep["where"].items():
+        parts.append(f"<h3>Run {e(rname)}{' (held out)' if w['holdout'] else ''}</h3>"
+                     "<table><tr><th>sensor</th><th>residual RMS</th><th>mean</th><th>slow RMS</th>"
+                     "<th>periodic RMS</th><th>slow share</th><th>periodic share</th></tr>")
+        for s, v in w["sensors"].items():
+            parts.append(f"<tr><td class=l>{e(s)}</td><td>{_fmt(v['rms'])}</td><td>{_fmt(v['mean'])}</td>"
+                         f"<td>{_fmt(v['slow_rms'])}</td><td>{_fmt(v['periodic_rms'])}</td>"
+                         f"<td>{_fmt(v['slow_share'])}</td><td>{_fmt(v['periodic_share'])}</td></tr>")
+        parts.append("</table><table><tr><th>sensor</th><th>window</th><th>t (s)</th><th>RMS</th>"
+                     "<th>slow RMS</th><th>periodic RMS</th></tr>")
+        for s, v in w["sensors"].items():
+            for win in v["windows"]:
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{e(win['kind'])}</td>"
+                             f"<td>{win['start_s']:.2f}-{win['stop_s']:.2f}</td><td>{_fmt(win['rms'])}</td>"
+                             f"<td>{_fmt(win['slow_rms'])}</td><td>{_fmt(win['periodic_rms'])}</td></tr>")
+        parts.append("</table><table><tr><th>sensor</th><th>band</th><th>Hz</th><th>RMS</th><th>share</th></tr>")
+        for s, v in w["sensors"].items():
+            for b in v["bands"]:
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{e(b['band'])}</td>"
+                             f"<td>{b['f_lo_hz']:.3g}-{b['f_hi_hz']:.3g}</td><td>{_fmt(b['rms'])}</td>"
+                             f"<td>{_fmt(b['share'])}</td></tr>")
+        parts.append("</table>")
+    # plots
+    parts.append("<h2>Plots</h2>")
+    last = d.steps[-1]
+    for c in d.ctx:
+        for s in c.sensors:
+            nom = c.nominal.columns[s]
+            ref = last["sims"][c.name].columns[s]
+            fig, ax = plt.subplots(2, 1, figsize=(10, 5.5))
+            ax[0].plot(c.t, c.meas[s], lw=0.6, label="measured", color="k")
+            ax[0].plot(c.t, nom, lw=1.0, label="nominal", color="tab:blue")
+            ax[0].plot(c.t, ref, lw=0.8, label="refined", color="tab:red")
+            ax[0].set_ylabel(f"{s} (N)")
+            ax[0].legend(loc="best", fontsize=8)
+            ax[0].set_title(f"run {c.name}: {s}")
+            # zoom: 4 s of the fit window
+            idx = np.flatnonzero(c.mask)
+            a = idx[len(idx) // 2] if len(idx) else 0
+            z = slice(a, min(len(c.t), a + int(4 * c.fs)))
+            ax[1].plot(c.t[z], c.meas[s][z], lw=0.8, color="k", label="measured")
+            ax[1].plot(c.t[z], nom[z], lw=1.0, color="tab:blue", label="nominal")
+            ax[1].plot(c.t[z], ref[z], lw=1.0, color="tab:red", label="refined")
+            ax[1].set_xlabel("t (s)")
+            ax[1].set_ylabel("zoom (N)")
+            parts.append(f"<img src='{_png(fig)}'>")
+            # spectra
+            fig, ax = plt.subplots(1, 1, figsize=(10, 3.8))
+            m = c.mask
+            for y, lab, col in ((c.meas[s], "measured", "k"), (c.meas[s] - nom, "residual nominal", "tab:blue"),
+                                (c.meas[s] - ref, "residual refined", "tab:red")):
+                p = split_slow_periodic(y, c.fs, c.fc)[1][m]
+                f, amp = spectra.amplitude_spectrum(p, c.fs)
+                ax.semilogy(f, np.maximum(amp, 1e-9), lw=0.7, label=lab, color=col)
+            fams = {k.element: c.freq[k.key] for k in d.cands if c.freq[k.key] > 0}
+            fmax = min(0.45 * c.fs, (d.opt.harmonics + 1) * max(fams.values())) if fams else 0.45 * c.fs
+            ax.set_xlim(0, fmax)
+            for pk in rep["where"][c.name]["sensors"][s]["peaks"][:12]:
+                lab = (f"{pk['element']}×{pk['order']}" if pk["status"] == "tagged"
+                       else ("?" if pk["status"] == "untagged" else "/".join(x["element"] for x in pk["candidates"][:3])))
+                ax.annotate(lab, (pk["frequency_hz"], pk["amplitude"]), fontsize=7, rotation=60,
+                            xytext=(0, 6), textcoords="offset points")
+            ax.set_xlabel("f (Hz)")
+            ax.set_ylabel("amplitude (N)")
+            ax.legend(fontsize=8)
+            ax.set_title(f"run {c.name}: spectra of {s} (fit window; peaks tagged to element×order)")
+            parts.append(f"<img src='{_png(fig)}'>")
+    parts.append(f"<h2>Run time</h2><p>{e(', '.join(f'{k} {v:.1f} s' for k, v in rep['timings_s'].items()))}; "
+                 f"{rep['simulations']['count']} simulations.</p>")
+    if rep["notes"]:
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{e(n)}</li>" for n in rep["notes"]) + "</ul>")
+    parts.append("</body></html>")
+    return "\n".join(parts)
