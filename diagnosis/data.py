@@ -2,8 +2,10 @@
 
 A record is a ``time`` vector (s) and one vector per sensor. Units come from
 the file (CSV header ``lc_unwind [lbf]``, ``v_line [ft/min]``, ``theta [deg]``;
-a MATLAB ``units`` struct) and are converted to SI with pint. A column without
-a unit is taken as recorded, assumed SI (N, m/s, rad, ...).
+a MATLAB ``units`` struct) and are converted to SI with the project's pint
+registry (:mod:`orchestrator.units`: lbf, ft/min = FPM, PLI, ...). A column
+without a unit is taken as recorded, assumed SI (N, m/s, rad, ...). Speeds in
+rpm become rad/s; Hz stays Hz (pint would turn Hz into rad/s without the 2 pi).
 
 Every defect is a :class:`DataError` naming the file, the column and the
 reason: a missing time column, time that goes backwards or is not uniform
@@ -20,6 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from orchestrator import units as web_units
 
 TIME_NAMES = ("time", "t")
 """Accepted names of the time column / variable (case-insensitive), in order of preference."""
@@ -82,44 +86,31 @@ class Record:
 
 # ----------------------------------------------------------------------------- units
 
-_REGISTRY = None
-
-
-def _ureg():
-    """The project's pint registry (``orchestrator.units.ureg``) or, until that exists,
-    a local one with the web-handling units it will carry (lbf, ft/min = FPM, PLI)."""
-    global _REGISTRY
-    if _REGISTRY is None:
-        try:
-            from orchestrator.units import ureg as registry
-        except ImportError:
-            import pint
-            registry = pint.UnitRegistry()
-            registry.define("FPM = foot / minute = fpm")
-            registry.define("PLI = pound_force / inch = pli")
-        _REGISTRY = registry
-    return _REGISTRY
+def _quantity(unit):
+    """One ``unit`` as a pint Quantity, read by the project's parser
+    (:func:`orchestrator.units.parse`: lbf, ft/min = FPM, PLI, mil = thou, ...).
+    Raises ``ValueError`` naming the unit. Offset units (degC) are refused."""
+    try:
+        return web_units.parse(f"1 {unit}")
+    except web_units.QuantityError as exc:
+        raise ValueError(f"unknown unit {unit!r} ({exc})") from None
 
 
 def si_unit(unit):
     """SI unit string that values in ``unit`` are stored in; raises ``ValueError`` if
-    pint does not know ``unit``.
+    the unit is unknown.
 
     >>> si_unit("lbf"), si_unit("ft/min"), si_unit("deg"), si_unit("rpm"), si_unit("Hz")
     ('N', 'm/s', 'rad', 'rad/s', 'Hz')
     """
-    ureg = _ureg()
-    try:
-        q = ureg.Quantity(1.0, unit)
-    except Exception as exc:  # pint raises several types (UndefinedUnitError, syntax errors)
-        raise ValueError(f"unknown unit {unit!r} ({exc})") from None
+    q = _quantity(unit)
     dim = str(q.dimensionality)
     has_angle = "radian" in dict(q.to_root_units().unit_items())
     table = _SI_ANGLE if has_angle else _SI_PLAIN
     if dim in table:
         return table[dim]
     for target in _SI_UNITS:
-        if ureg.Quantity(1.0, target).dimensionality == q.dimensionality:
+        if web_units.ureg.get_dimensionality(target) == q.dimensionality:
             return target
     return f"{q.to_base_units().units:~}"
 
@@ -128,9 +119,10 @@ def _to_si(values, unit, path, column):
     """(values in SI, SI unit string)."""
     try:
         target = si_unit(unit)
-        return np.asarray(_ureg().Quantity(values, unit).to(target).magnitude, float), target
+        factor = float(_quantity(unit).to(target).magnitude)
     except ValueError as exc:
         raise DataError(path, column, str(exc)) from None
+    return np.asarray(values, dtype=float) * factor, target
 
 
 def _check_expected(unit, expected, path, column):
@@ -138,13 +130,12 @@ def _check_expected(unit, expected, path, column):
     ``expected``: another dimension, or angle vs plain (rad/s vs Hz)."""
     if unit is None or expected is None:
         return
-    ureg = _ureg()
     try:
         same = si_unit(unit) == si_unit(expected)
     except ValueError as exc:
         raise DataError(path, column, str(exc)) from None
     if not same:
-        got, want = ureg.Quantity(1.0, unit), ureg.Quantity(1.0, expected)
+        got, want = _quantity(unit), _quantity(expected)
         raise DataError(path, column, f"unit {unit!r} has dimension {got.dimensionality}, "
                                       f"expected {expected!r} ({want.dimensionality})")
 
