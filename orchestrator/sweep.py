@@ -67,11 +67,24 @@ _UREG = None
 
 
 def _ureg():
+    """The layout's unit registry (orchestrator.units: fpm, PLI, mil as thou...)."""
     global _UREG
     if _UREG is None:
-        import pint
-        _UREG = pint.UnitRegistry()
+        try:
+            from orchestrator.units import ureg
+            _UREG = ureg
+        except ImportError:
+            import pint
+            _UREG = pint.UnitRegistry()
     return _UREG
+
+
+def _parse(text):
+    try:
+        from orchestrator.units import parse
+    except ImportError:
+        return _ureg().Quantity(text)
+    return parse(text)
 
 
 def quantity(text):
@@ -81,7 +94,7 @@ def quantity(text):
     if isinstance(text, (int, float)):
         return _ureg().Quantity(float(text))
     try:
-        q = _ureg().Quantity(str(text))
+        q = _parse(str(text))
     except Exception as exc:
         raise ValueError(f"{text!r} is not a number with a unit ({exc})") from None
     if not isinstance(q.magnitude, (int, float)):
@@ -551,6 +564,8 @@ def _simulate_task(task):
 
 def _save_results(results_mod, result, system, run_dir):
     """Write results.h5 through orchestrator.results (its documented writer)."""
+    if hasattr(result, "save"):
+        return result.save(run_dir)
     for name in ("write_hdf5", "write_h5", "save_hdf5"):
         fn = getattr(results_mod, name, None)
         if fn is not None:
