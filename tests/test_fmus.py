@@ -310,3 +310,22 @@ def test_driven_roller_fmu_with_backlash_starts_at_its_operating_point(fmus):
         roller.step(k * 0.005, 0.005)
     assert roller.get(["omega", "omega_motor"]) == [pytest.approx(8.0, rel=1e-10)] * 2
     roller.free()
+
+
+def test_fmus_run_one_after_another_in_a_fresh_process(fmus, tmp_path):
+    # Without webline imported by the host, each FMU imports its bundled copy;
+    # fmpy.simulate_fmu deletes an FMU's folder after the run, and the next FMU
+    # of another type must still import (the scripts drop the stale package).
+    code = (
+        "import sys\n"
+        "from fmpy import simulate_fmu\n"
+        "for p in sys.argv[1:]:\n"
+        "    r = simulate_fmu(p, stop_time=0.01, step_size=1e-3)\n"
+        "    assert '/resources/webline/' in sys.modules['webline'].__file__\n"
+        "print('ok')\n")
+    import subprocess
+    import sys
+    paths = [str(fmus[m]) for m in ("IdleRoller", "LoadCell", "SpeedPI", "Profile")]
+    p = subprocess.run([sys.executable, "-c", code, *paths], cwd=tmp_path, capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 0 and p.stdout.strip() == "ok", p.stderr

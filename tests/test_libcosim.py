@@ -8,15 +8,13 @@ import math
 
 import numpy as np
 import pytest
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+from libcosimpy.CosimObserver import CosimObserver
+from libcosimpy.CosimSlave import CosimLocalSlave
 
 from fmu_loop import Instance, run_libcosim_order
 from webline.physics.load_cell import standard_normal
-
-libcosim = pytest.importorskip("libcosimpy")
-from libcosimpy.CosimExecution import CosimExecution  # noqa: E402
-from libcosimpy.CosimLogging import CosimLogLevel, log_output_level  # noqa: E402
-from libcosimpy.CosimObserver import CosimObserver  # noqa: E402
-from libcosimpy.CosimSlave import CosimLocalSlave  # noqa: E402
 
 H = 1.0e-3
 
