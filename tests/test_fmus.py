@@ -329,3 +329,18 @@ def test_fmus_run_one_after_another_in_a_fresh_process(fmus, tmp_path):
     p = subprocess.run([sys.executable, "-c", code, *paths], cwd=tmp_path, capture_output=True, text=True,
                        timeout=120)
     assert p.returncode == 0 and p.stdout.strip() == "ok", p.stderr
+
+
+def test_bad_input_is_logged_and_fails_the_next_step(fmus):
+    # A getter cannot return an error status through pythonfmu without fmi2Fatal:
+    # the FMU logs the cause, keeps the last value and discards the next step.
+    pi = Instance(fmus["SpeedPI"], "pi", {"K_ref": 10.0}, {"v_ref": 1.0, "R": 0.1, "J": 0.5}).init()
+    tau0 = pi.get(["tau"])[0]
+    assert tau0 == pytest.approx(0.5 * 10.0 * 10.0)
+    pi.set({"R": 0.0})
+    assert pi.get(["tau"]) == [tau0]
+    assert "input R must be > 0" in pi.log_text()
+    with pytest.raises(FMICallException) as err:
+        pi.step(0.0, 1e-3)
+    assert err.value.status == 2
+    pi.free()
