@@ -155,9 +155,17 @@ class ReferenceSystem:
                             needs.add(f)
                 deps[(ci, o)] = needs
         self.schedule = self._schedule(deps)
+        # inside the RHS only outputs that feed an input matter
+        self.rhs_schedule = []
+        for c, model, y, entries in self.schedule:
+            used = [(o, dests) for o, dests in entries if dests]
+            if used:
+                a, b = self.offsets[c]
+                self.rhs_schedule.append((model.outputs, a, b, self.u[c], used))
 
         # state-carrying components, for derivatives
         self.stateful = [(ci, a, b) for ci, (a, b) in enumerate(self.offsets) if b > a]
+        self.derivative_calls = [(self.models[ci].derivatives, a, b, self.u[ci]) for ci, a, b in self.stateful]
 
     def _schedule(self, deps):
         """Kahn levels of output nodes, each level grouped by component:
@@ -198,11 +206,15 @@ class ReferenceSystem:
 
     def rhs(self, t, x):
         xl = x.tolist()
-        self._evaluate(t, xl)
+        for outputs, a, b, u, used in self.rhs_schedule:
+            values = outputs(t, xl[a:b], u)
+            for o, dests in used:
+                v = values[o]
+                for ulist, i in dests:
+                    ulist[i] = v
         dx = [0.0] * len(xl)
-        u, models = self.u, self.models
-        for c, a, b in self.stateful:
-            dx[a:b] = models[c].derivatives(t, xl[a:b], u[c])
+        for derivatives, a, b, u in self.derivative_calls:
+            dx[a:b] = derivatives(t, xl[a:b], u)
         return np.array(dx)
 
     def outputs(self, t, x):
