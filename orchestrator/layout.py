@@ -365,7 +365,7 @@ class _Checker:
         p, d = self.L.path, self.L.drives
         driven = [i for i, e in enumerate(p) if e.type in lm.DRIVEN_TYPES]
         sensors = _sensor_map(self.L)
-        used = {}
+        used, n_issues = {}, len(self.issues)
         for zone, t in d.tension_loops.items():
             lc_loc = ("drives", "tension_loops", zone, "load_cell")
             sensor = sensors.get(t.load_cell)
@@ -388,7 +388,7 @@ class _Checker:
                 self.err(("drives", "tension_loops", zone), f"zone {p[z[0]].name!r}..{p[z[1]].name!r} already "
                                                             f"has tension loop {used[z]!r}")
             used.setdefault(z, zone)
-        if driven and driven[0] == 0 and len(driven) > 1:
+        if len(self.issues) == n_issues and driven and driven[0] == 0 and len(driven) > 1:
             z0 = (driven[0], driven[1])
             if z0 not in used:
                 self.err(("drives", "tension_loops"),

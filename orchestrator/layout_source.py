@@ -109,7 +109,7 @@ def load_yaml(path, text=None):
         loader.dispose()
 
 
-def _build(loader, node, path):
+def _build(loader, node, path, prefix=""):
     if isinstance(node, yaml.MappingNode):
         loader.flatten_mapping(node)  # YAML merge keys (<<)
         out = LocDict(loc=_loc(path, node))
@@ -119,13 +119,14 @@ def _build(loader, node, path):
                 raise LayoutError(Issue(_loc(path, knode), "", f"mapping keys must be names (got {key!r})"))
             key = str(key)
             if key in out:
-                raise LayoutError(Issue(_loc(path, knode), key,
+                raise LayoutError(Issue(_loc(path, knode), prefix + key,
                                         f"duplicate key (first given on line {out.key_locs[key].line})"))
-            out[key] = _build(loader, vnode, path)
+            out[key] = _build(loader, vnode, path, f"{prefix}{key}.")
             out.key_locs[key] = _loc(path, knode)
         return out
     if isinstance(node, yaml.SequenceNode):
-        out = LocList([_build(loader, n, path) for n in node.value], loc=_loc(path, node))
+        out = LocList([_build(loader, n, path, f"{prefix}{i}.") for i, n in enumerate(node.value)],
+                      loc=_loc(path, node))
         out.item_locs = [_loc(path, n) for n in node.value]
         return out
     return loader.construct_object(node, deep=True)
@@ -246,6 +247,7 @@ def apply_override(data, key, value, loc):
     for depth, part in enumerate(parts):
         last = depth == len(parts) - 1
         where = ".".join(parts[:depth + 1])
+        parent = cur
         if isinstance(cur, list):
             i = _item_index(cur, part)
             if i is None:
@@ -279,6 +281,27 @@ def apply_override(data, key, value, loc):
         else:
             raise LayoutError(Issue(loc, ".".join(parts[:depth]),
                                     f"is a single value ({cur!r}); it has no key {part!r}"))
+        if not isinstance(cur, (dict, list)) and not last:
+            cur = _expand_shorthand(parent, parts[depth], cur, parts[:depth + 1])
+
+
+# A single value standing for a mapping: (key, key of the mapping's parent or None) -> field it fills.
+SHORTHANDS = {("span", None): "length", ("line_speed", "experiment"): "initial", (None, "tension"): "initial"}
+
+
+def _expand_shorthand(parent, key, value, parts):
+    """Replace a shorthand value (``span: 1 m``) by its mapping (``{length: 1 m}``) so a dotted key
+    can reach into it; a value with no shorthand form is left (the next part then fails)."""
+    up = parts[-2] if len(parts) >= 2 else None
+    field = SHORTHANDS.get((key, None)) or SHORTHANDS.get((key, up)) or \
+        (SHORTHANDS.get((None, up)) if len(parts) >= 3 and parts[-3] == "experiment" else None)
+    if field is None or not isinstance(parent, dict):
+        return value
+    loc = parent.key_locs.get(key, parent.loc)
+    out = LocDict({field: value}, loc=loc)
+    out.key_locs[field] = loc
+    parent[key] = out
+    return out
 
 
 # ---- locating a field -------------------------------------------------------------------------
