@@ -285,6 +285,8 @@ class Plan:
     def __init__(self, slaves, y, u, dst, src, groups, sinks, chains, columns, units, descriptions):
         self.slaves, self.y, self.u, self.dst, self.src = slaves, y, u, dst, src
         self.groups, self.sinks, self.chains = groups, sinks, chains
+        self.gs_order = [(chains[s.name], s) for s in slaves]
+        self.gauss_seidel = False  # set by simulate: complete() then resolves the groups
         self.columns, self.units, self.descriptions = columns, units, descriptions
 
 
@@ -437,12 +439,29 @@ def plan_coupling(slaves, connections):
         s.dst = np.array(per_slave[s.name][0], dtype=np.intp)
         s.src = np.array(per_slave[s.name][1], dtype=np.intp)
 
-    # for Gauss-Seidel: the feed-through groups (in order) that slave k's inputs need
+    # Gauss-Seidel schedule: before slave k steps, the feed-through groups its inputs
+    # need (transitively, in topological order) that changed since they were last
+    # resolved. A group changes when any slave it depends on steps (its own slave
+    # included: a controller's integrator). Computed once for the fixed order, from
+    # "nothing resolved" at the start of a round, which is never optimistic.
     group_of = {}
     for g in groups:
         for o in g.slave.outputs[g.a:g.b]:
             group_of[(g.slave.name, o)] = g
-    chains = {}
+    sources = {}  # id(group) -> names of the slaves whose steps change it
+
+    def sources_of(g):
+        if id(g) not in sources:
+            found = {g.slave.name}
+            for i in g.deps:
+                node = feeds[(g.slave.name, i)]
+                found |= sources_of(group_of[node]) if node in group_of else {node[0]}
+            sources[id(g)] = found
+        return sources[id(g)]
+
+    for g in groups:
+        sources_of(g)
+    chains, valid = {}, set()
     for s in slaves:
         need, stack = set(), [feeds[(s.name, n)] for n in s.inputs]
         while stack:
@@ -452,7 +471,9 @@ def plan_coupling(slaves, connections):
                 continue
             need.add(id(g))
             stack.extend(feeds[(g.slave.name, n)] for n in g.deps)
-        chains[s.name] = [g for g in groups if id(g) in need]
+        chains[s.name] = [g for g in groups if id(g) in need and id(g) not in valid]
+        valid |= {id(g) for g in chains[s.name]}
+        valid -= {id(g) for g in groups if s.name in sources[id(g)]}
     return Plan(slaves, y, u, np.array(dst, dtype=np.intp), np.array(src, dtype=np.intp),
                 groups, sinks, chains, columns, units, descriptions)
 
@@ -504,12 +525,14 @@ def jacobi_step(plan, t, h):
 
 def gauss_seidel_step(plan, t, h):
     """Slaves step one after the other (system order), each from the latest values
-    of the slaves stepped before it (feed-through chains re-resolved first)."""
-    y, u, chains = plan.y, plan.u, plan.chains
+    of the slaves stepped before it (the feed-through outputs it needs re-resolved
+    first, as scheduled by plan_coupling). Feed-through outputs at ``t + h`` are
+    resolved only when recorded (:func:`complete`): the next step re-resolves what
+    it needs anyway."""
+    y, u = plan.y, plan.u
     ct, ch, one = c_double(t), c_double(h), c_int(1)
     t1 = t + h
-    for s in plan.slaves:
-        chain = chains[s.name]
+    for chain, s in plan.gs_order:
         if chain:
             resolve(chain, y, u, t)
         if s.set_inputs is not None:
@@ -524,11 +547,14 @@ def gauss_seidel_step(plan, t, h):
             st = s.get_state()
             if st:
                 _fail(s, "fmi2GetReal", st, t1)
-    resolve(plan.groups, y, u, t1)
 
 
 def complete(plan, t):
-    """Read the outputs that only get recorded (nothing depends on them) at ``t``."""
+    """Make every output consistent at ``t`` before it is recorded: the feed-through
+    groups (Gauss-Seidel leaves them to the next step) and the outputs nothing
+    depends on (read only here)."""
+    if plan.gauss_seidel:
+        resolve(plan.groups, plan.y, plan.u, t)
     for s in plan.slaves:
         if s.get_rest is not None:
             st = s.get_rest()
@@ -617,6 +643,7 @@ def simulate(system, fmu_paths=None, progress=True):
         "system_meta": system.meta,
     }
     step = STEP[e.algorithm]
+    plan.gauss_seidel = e.algorithm == "gauss-seidel"
     status, message, k = "ok", "", 0
     t_setup = _time.perf_counter()
     t_loop, wall, setup_time = 0.0, 0.0, 0.0
