@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+import scipy.integrate
 import scipy.interpolate
 import scipy.ndimage
 import scipy.optimize
@@ -45,9 +46,7 @@ def angle_from_encoder(angle, period=TWO_PI):
 
 def angle_from_speed(t, omega, theta0=0.0):
     """Shaft angle (rad) by trapezoidal integration of the angular speed ``omega`` (rad/s)."""
-    t = np.asarray(t, dtype=float)
-    omega = np.asarray(omega, dtype=float)
-    return theta0 + np.concatenate(([0.0], np.cumsum(0.5 * (omega[1:] + omega[:-1]) * np.diff(t))))
+    return theta0 + scipy.integrate.cumulative_trapezoid(np.asarray(omega, dtype=float), t, initial=0.0)
 
 
 def pulse_edges(t, pulse, *, threshold=None, hysteresis=0.2):
