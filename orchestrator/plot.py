@@ -41,12 +41,14 @@ def _system_meta(result):
 
 
 def tension_columns(result):
-    """Load-cell readings ``<lc>.T`` (those named in ``System.meta['sensors']`` if given),
-    else every span tension."""
+    """Load-cell readings ``<lc>.T`` (those named in ``System.meta['sensors']`` if given:
+    a list of names or a {name: {component: ...}} mapping), else every span tension."""
     models = _models(result)
     sensors = _system_meta(result).get("sensors")
     cells = [n for n, m in models.items() if m == "LoadCell"]
-    if isinstance(sensors, (list, tuple)):
+    if isinstance(sensors, dict):
+        sensors = [v if isinstance(v, dict) else k for k, v in sensors.items()]
+    if isinstance(sensors, (list, tuple)) and sensors:
         wanted = [s if isinstance(s, str) else s.get("component", s.get("name", "")) for s in sensors]
         chosen = [n for n in wanted if f"{n}.T" in result]
         cells = chosen or cells
@@ -58,15 +60,38 @@ def tension_columns(result):
     return cols
 
 
-def speed_columns(result):
-    """Web speed ``<comp>.v`` of every rotating element (driven ones first)."""
+def speed_columns(result, idlers=False):
+    """Web speed ``<comp>.v`` of the driven elements (rolls, driven rollers) in system
+    order, and of the idle rollers too with ``idlers``."""
     models = _models(result)
     if not models:
         return [c for c in result.columns if c.endswith(".v")]
-    order = {"UnwindRoll": 0, "DrivenRoller": 1, "RewindRoll": 2, "IdleRoller": 3}
-    names = sorted((n for n, m in models.items() if m in order and f"{n}.v" in result),
-                   key=lambda n: order[models[n]])
-    return [f"{n}.v" for n in names]
+    kinds = ("UnwindRoll", "DrivenRoller", "RewindRoll") + (("IdleRoller",) if idlers else ())
+    return [f"{n}.v" for n, m in models.items() if m in kinds and f"{n}.v" in result]
+
+
+def line_speed_column(result):
+    """The line-speed reference column named by ``System.meta['line_speed']``, if recorded."""
+    c = _system_meta(result).get("line_speed")
+    return c if isinstance(c, str) and c in result else None
+
+
+def display_unit(result, quantity, si_unit):
+    """(unit, SI per unit) for plotting ``quantity`` ("tension", "speed"): the layout's
+    display unit from ``System.meta['units']['display']``, else SI."""
+    d = _system_meta(result).get("units", {})
+    d = d.get("display", {}) if isinstance(d, dict) else {}
+    u = d.get(quantity) if isinstance(d, dict) else None
+    if isinstance(u, dict) and u.get("unit") and u.get("si_per_unit"):
+        return str(u["unit"]), float(u["si_per_unit"])
+    return si_unit, 1.0
+
+
+def _label(result, column):
+    """``lc9 (roller9).T``: component, its element when different, variable."""
+    comp, var = column.split(".", 1)
+    el = _element(result, comp)
+    return f"{comp} ({el}).{var}" if el != comp else column
 
 
 def steady_window(result):
@@ -141,10 +166,16 @@ def plot_results(result, out_dir, window=None, fmax=None):
         title += f" ({result.status})"
 
     # time series
+    t_unit, t_si = display_unit(result, "tension", "N")
+    v_unit, v_si = display_unit(result, "speed", "m/s")
     fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
-    for ax, cols, label in ((axes[0], tens, "tension [N]"), (axes[1], speeds, "web speed [m/s]")):
+    panels = ((axes[0], tens, f"tension [{t_unit}]", t_si, None),
+              (axes[1], speeds, f"web speed [{v_unit}]", v_si, line_speed_column(result)))
+    for ax, cols, label, si, ref in panels:
         for c in cols:
-            ax.plot(result.time, result[c], lw=0.8, label=_element(result, c.split(".")[0]) + "." + c.split(".", 1)[1])
+            ax.plot(result.time, result[c] / si, lw=0.8, label=_label(result, c))
+        if ref is not None:
+            ax.plot(result.time, result[ref] / si, "k--", lw=0.8, label=f"reference ({ref})")
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
         if cols and len(cols) <= MAX_LINES:
@@ -174,12 +205,12 @@ def plot_results(result, out_dir, window=None, fmax=None):
     fmax = min(float(fmax), nyquist)
     for ax, c in zip(axes, tens or [None]):
         if c is not None:
-            f, a = amplitude_spectrum(result.time, result[c], window)
+            f, a = amplitude_spectrum(result.time, result[c] / t_si, window)
             band = f <= fmax
             if band.any():
                 ax.plot(f[band], a[band], lw=0.9, color="k")
                 ax.set_ylim(bottom=0.0, top=1.15 * float(a[band].max()) or 1.0)
-            ax.set_ylabel(f"{_element(result, c.split('.')[0])}\namplitude [N]")
+            ax.set_ylabel(f"{_label(result, c)}\namplitude [{t_unit}]")
         else:
             ax.text(0.5, 0.5, "no tension columns", transform=ax.transAxes, ha="center")
         ymax = ax.get_ylim()[1]

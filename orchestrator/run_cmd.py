@@ -47,15 +47,19 @@ def parser():
 
 def summary(result):
     """Short text: mean / peak-to-peak tension per load cell, wall time, real-time factor."""
-    from orchestrator.plot import tension_columns
+    from orchestrator.plot import display_unit, tension_columns
 
     lines = []
     m = result.meta
-    n = len(result.time)
-    if n:
+    unit, si = display_unit(result, "tension", "N")
+    if len(result.time):
         for c in tension_columns(result):
             x = result[c]
-            lines.append(f"  {c:<24} mean {x.mean():10.2f} N   p2p {x.max() - x.min():9.3f} N")
+            mean, p2p = float(x.mean()), float(x.max() - x.min())
+            text = f"  {c:<20} mean {mean:9.2f} N   p2p {p2p:8.3f} N"
+            if unit != "N":
+                text += f"   ({mean / si:.3f} / {p2p / si:.4f} {unit})"
+            lines.append(text)
     sim = m.get("simulated_time", 0.0)
     wall = m.get("wall_time", 0.0)
     rtf = m.get("real_time_factor", float("nan"))

@@ -199,3 +199,27 @@ def test_run_command_failure_saves_partial_results(tmp_path, capsys):
     assert "run failed" in err and "fmi2DoStep returned fmi2Discard" in err and "component '" in err
     r = load_results(out)
     assert r.status == "failed" and 0 < len(r.time) < 2001
+
+
+def test_plot_helpers_follow_the_layout_meta():
+    """Sensors as the layout writes them ({name: {component: ...}}), display units, line speed."""
+    from orchestrator.plot import display_unit, line_speed_column, speed_columns, tension_columns
+    from orchestrator.results import Result
+
+    t = np.linspace(0, 1, 11)
+    cols = ["a.T", "b.T", "lc.T", "u.v", "i.v", "line_speed.y"]
+    comps = {"a": {"model": "Span"}, "b": {"model": "Span"}, "lc": {"model": "LoadCell", "element": "r9"},
+             "u": {"model": "UnwindRoll"}, "i": {"model": "IdleRoller"}, "line_speed": {"model": "Profile"}}
+    meta = {"components": comps, "system_meta": {
+        "sensors": {"lc": {"component": "lc", "roller": "r9"}}, "line_speed": "line_speed.y",
+        "units": {"display": {"tension": {"unit": "lbf", "si_per_unit": 4.448222}}}}}
+    r = Result(t, np.ones((11, 6)), cols, {c: "" for c in cols}, {}, meta)
+    assert tension_columns(r) == ["lc.T"]
+    assert speed_columns(r) == ["u.v"] and speed_columns(r, idlers=True) == ["u.v", "i.v"]
+    assert line_speed_column(r) == "line_speed.y"
+    assert display_unit(r, "tension", "N") == ("lbf", 4.448222)
+    assert display_unit(r, "speed", "m/s") == ("m/s", 1.0)
+    r.meta["system_meta"] = {}
+    assert tension_columns(r) == ["lc.T"]
+    del r.meta["components"]["lc"]
+    assert tension_columns(r) == ["a.T", "b.T"]  # no load cell: the span tensions
