@@ -93,7 +93,7 @@ def ssd_tree(system, name="webline", parameter_files=False, fmu_source=lambda mo
         if k.dst_var not in iface[dst_model]["inputs"]:
             raise KeyError(f"connection {k}: {k.dst_var!r} is not an input of {dst_model}")
         us, ud = iface[src_model]["unit"][k.src_var], iface[dst_model]["unit"][k.dst_var]
-        if us != ud:
+        if us != ud and "1" not in (us, ud):  # "1": a generic signal (Profile.y) takes any unit
             raise ValueError(f"connection {k}: units differ ({us} -> {ud}); SSP export does no unit conversion")
 
     root = ET.Element(_q("ssd", "SystemStructureDescription"),
@@ -113,8 +113,11 @@ def ssd_tree(system, name="webline", parameter_files=False, fmu_source=lambda mo
         for var, kind in kinds:
             conn = ET.SubElement(conns, _q("ssd", "Connector"), {"name": var, "kind": kind})
             unit = m["unit"][var]
-            used_units.add(unit)
-            ET.SubElement(conn, _q("ssc", "Real"), {"unit": unit})
+            if unit == "1":  # generic signal: no unit, so no importer sees a conversion to do
+                ET.SubElement(conn, _q("ssc", "Real"))
+            else:
+                used_units.add(unit)
+                ET.SubElement(conn, _q("ssc", "Real"), {"unit": unit})
         values = {}
         for group, allowed, what in ((c.parameters, m["parameters"], "parameter"),
                                      (c.inputs, m["inputs"], "input")):

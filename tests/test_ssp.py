@@ -1,6 +1,7 @@
 """SSP export (orchestrator.ssp): schema-valid, readable by fmpy, runnable in libcosim,
 and libcosim's results match ours."""
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -102,3 +103,65 @@ def test_export_rejects_unknown_variables(tmp_path):
     bad.components[0].parameters["nope"] = 1.0
     with pytest.raises(KeyError, match="nope"):
         export_ssp(bad, tmp_path / "bad.ssp")
+
+
+# ---- the EWL scenario -----------------------------------------------------------------
+EWL = Path(__file__).resolve().parent.parent / "scenarios" / "ewl.yaml"
+
+
+def _outputs_valid_in_initialization_mode():
+    """True if an FMU answers a feed-through output with a computed value in
+    initialization mode. libcosim reads outputs there to pass initial values
+    along connections (our master reads them after initialisation); a wrapper
+    that builds its model only in exit_initialization_mode answers the declared
+    start value, and the first step of libcosim then starts from wrong inputs."""
+    from orchestrator.reference import fmu_classes
+    classes = fmu_classes()
+    if "SpeedPI" not in classes:
+        return True
+    slave = classes["SpeedPI"](instance_name="probe")
+    v = {x.name: x for x in slave.vars.values()}
+    for name, value in (("K_ref", 10.0), ("v_ref", 1.0), ("R", 0.1), ("J", 1.0), ("omega", 5.0)):
+        v[name].setter(value)
+    slave.setup_experiment(0.0, None, None)
+    slave.enter_initialization_mode()
+    declared = next(x.start for x in type(slave).OUTPUTS if x.name == "tau")
+    return v["tau"].getter() != declared
+
+
+@pytest.fixture(scope="module")
+def ewl_short(tmp_path_factory):
+    if not EWL.exists():
+        pytest.skip("no scenarios/ewl.yaml")
+    from orchestrator.layout import load_system
+    system = load_system(EWL)
+    system.experiment.stop = 0.1
+    return system, export_ssp(system, tmp_path_factory.mktemp("ewl") / "ewl.ssp")
+
+
+def test_ewl_exports_valid_ssp(ewl_short):
+    system, path = ewl_short
+    from fmpy.ssp.ssd import read_ssd
+    ssd = read_ssd(str(path), validate=True)
+    assert len(ssd.system.elements) == len(system.components)
+    assert len(ssd.system.connections) == len(system.connections)
+    back = read_ssp(path)
+    assert [c.parameters for c in back.components] == [
+        {k: float(v) for k, v in c.parameters.items()} for c in system.components]
+
+
+@pytest.mark.xfail(not _outputs_valid_in_initialization_mode(), strict=True,
+                   reason="ElementSlave builds its model only in exit_initialization_mode: libcosim "
+                          "propagates declared start values of feed-through outputs (SpeedPI.tau) "
+                          "during initialisation, so its first step differs")
+def test_ewl_in_libcosim_matches_our_master(ewl_short):
+    system, path = ewl_short
+    from orchestrator.master import simulate
+    ours = simulate(system, progress=False)
+    assert ours.ok, ours.message
+    t, d = simulate_libcosim(path)
+    assert np.allclose(ours.time[1:], t)
+    tensions = [c for c in ours.columns if c.endswith(".T")]
+    assert len(tensions) > 10
+    for col in tensions:
+        assert _rel_err(d[col], ours[col][1:]) < 1e-3, col
