@@ -71,3 +71,24 @@ def test_a_diverging_run_is_reported_not_raised():
     assert run["status"] == "failed" and run["worst"] == math.inf
     assert "diverged" in markdown_table(report)
     assert json_ready(report)["runs"][0]["worst"] == "inf"
+
+
+def test_accuracy_command_on_the_ewl(tmp_path, capsys):
+    from pathlib import Path
+    layout = Path(__file__).resolve().parent.parent / "scenarios" / "ewl.yaml"
+    if not layout.exists():
+        pytest.skip("no scenarios/ewl.yaml")
+    from webline.cli import main
+    out = tmp_path / "acc.json"
+    code = main(["accuracy", str(layout), "--stop", "0.1", "--steps", "1ms,2ms", "--algorithms", "gauss-seidel",
+                 "--json", str(out)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "| 1 ms | gauss-seidel |" in text and "| 2 ms | gauss-seidel |" in text
+    report = json.loads(out.read_text())
+    assert report["columns"] == ["lc9.T", "lc15.T", "lc19.T"]
+    for run in report["runs"]:
+        assert run["status"] == "ok" and 0 < run["worst"] < 1e-2
+    with pytest.raises(SystemExit) as exc:  # argparse: bad option
+        main(["accuracy", str(layout), "--steps", "fast"])
+    assert exc.value.code == 2

@@ -165,3 +165,15 @@ def test_ewl_in_libcosim_matches_our_master(ewl_short):
     assert len(tensions) > 10
     for col in tensions:
         assert _rel_err(d[col], ours[col][1:]) < 1e-3, col
+
+
+def test_export_ssp_command(tmp_path, capsys):
+    if not EWL.exists():
+        pytest.skip("no scenarios/ewl.yaml")
+    from webline.cli import main
+    out = tmp_path / "line.ssp"
+    assert main(["export-ssp", str(EWL), str(out), "--stop", "0.5", "--step", "0.002"]) == 0
+    assert "components" in capsys.readouterr().out
+    back = read_ssp(out)
+    assert (back.experiment.stop, back.experiment.step) == (0.5, 0.002)
+    assert main(["export-ssp", str(tmp_path / "missing.yaml"), str(out)]) == 2
