@@ -32,7 +32,7 @@ from pydantic import BaseModel, ValidationError
 
 from orchestrator import layout_model as lm
 from orchestrator import operating_point as opm
-from orchestrator.layout_source import Issue, LayoutError, Location, load_located, locate, plain
+from orchestrator.layout_source import Issue, LayoutError, Location, load_located, locate, plain, with_location
 from orchestrator.system import Component, Connection, Experiment, System
 from orchestrator.units import QuantityError, convert, parse, quantity, si_factor
 
@@ -59,10 +59,21 @@ def load_layout(path, overrides=None):
         raise LayoutError(_sorted(_pydantic_issues(exc, data))) from None
     layout._data = data
     layout._file = str(path)
-    issues = _Checker(layout, data).run()
+    _check(layout)
+    return layout
+
+
+def _check(layout):
+    """Cross-field checks (once per layout); LayoutError listing every problem."""
+    if getattr(layout, "_checked", False):
+        return
+    if layout._data is None:  # made in code: locate problems in its own data, as "<layout>"
+        layout._data = with_location(layout.model_dump(by_alias=True), Location("<layout>"))
+        layout._file = layout._file or "<layout>"
+    issues = _Checker(layout, layout._data).run()
     if issues:
         raise LayoutError(_sorted(issues))
-    return layout
+    layout._checked = True
 
 
 def load_system(path, overrides=None):
@@ -249,7 +260,10 @@ class _Checker:
                                               f"not below the span length {L0:g} m")
 
     def roll_radius(self, loc, e, radius):
-        if not radius > e.core_radius:
+        if e.type == "rewind" and radius == e.core_radius:
+            if not e.core_inertia > 0.0:  # a bare core: only J_0 to turn
+                self.err(loc[:2] + ("core_inertia",), "must be > 0 for a rewind starting on its bare core")
+        elif not radius > e.core_radius:
             self.err(loc, f"roll radius {radius:g} m must be above the core radius {e.core_radius:g} m "
                           f"({e.name!r})")
 
@@ -466,7 +480,10 @@ def _span_end_C(path, k):
 
 # ---- building the System ----------------------------------------------------------------------
 def build_system(layout):
-    """The :class:`System` of a validated layout, started at its operating point."""
+    """The :class:`System` of a validated layout, started at its operating point.
+
+    A Layout made in code (``Layout.model_validate``) is checked here as ``load_layout`` would."""
+    _check(layout)
     return _Builder(layout).build()
 
 
@@ -806,7 +823,7 @@ class _Builder:
                    for name, (s, r) in self.sensors.items()}
         return {
             "name": L.name or Path(self.file).stem, "description": L.description,
-            "layout": self.file, "layout_file": self.file,
+            "layout": self.file, "layout_file": str(Path(self.file).resolve()) if self.file and Path(self.file).is_file() else self.file,
             "web": {"material": L.web.material, "width": L.web.width, "thickness": L.web.thickness,
                     "density": L.web.density, "E": L.web.E, "EA": self.EA},
             "master": L.drives.master, "line_speed": "line_speed.y",

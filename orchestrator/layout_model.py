@@ -185,7 +185,8 @@ class _Element(Strict):
 
 
 class _Roll(_Element):
-    radius: PositiveLength = _doc("Roll radius at the start (experiment.roll_radius overrides it)")
+    radius: PositiveLength = _doc("Roll radius at the start, above the core (a rewind may start on its bare "
+                                  "core); experiment.roll_radius overrides it")
     core_radius: PositiveLength = _doc("Core radius R_c ({4})")
     core_inertia: NonNegInertia = _doc("J_0 of {3}: core, shaft, coupling and motor (ideal drive)")
     friction: Friction = _doc("Viscous friction b", default=0.0)
@@ -362,6 +363,7 @@ class Layout(Strict):
     experiment: Experiment
     _data: Any = PrivateAttr(default=None)  # the located YAML data (orchestrator.layout_source)
     _file: str = PrivateAttr(default="")
+    _checked: bool = PrivateAttr(default=False)
 
 
 def json_schema():

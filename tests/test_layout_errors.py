@@ -253,3 +253,23 @@ def test_webline_cli_dispatches_validate(tmp_path, capsys):
     from webline.cli import COMMANDS, main
     assert COMMANDS["validate"][0] == "orchestrator.validate_cmd"
     assert main(["validate", str(write(tmp_path, MINI))]) == 0
+
+
+def test_rewind_may_start_on_its_bare_core(tmp_path):
+    p = write(tmp_path, MINI)
+    s = load_system(p, {"rewind.radius": "1.75 in"})
+    assert s.component("rewind").parameters["R0"] == s.component("rewind").parameters["R_core"]
+    msg = str(error_of(p, {"rewind.radius": "1.75 in", "rewind.core_inertia": 0}))
+    assert "path.rewind.core_inertia: must be > 0 for a rewind starting on its bare core" in msg
+    assert "path.unwind.radius: roll radius" in str(error_of(p, {"unwind.radius": "1.75 in"}))
+
+
+def test_layout_made_in_code_is_checked_when_built():
+    import yaml
+    from orchestrator.layout import Layout, build_system
+    data = yaml.safe_load(MINI)
+    system = build_system(Layout.model_validate(data, context={"width": 0.1524}))
+    assert system.check() == [] and system.meta["layout"] == "<layout>"
+    data["drives"]["master"] = "nobody"
+    with pytest.raises(LayoutError, match=r"^<layout>: drives.master: unknown element 'nobody'"):
+        build_system(Layout.model_validate(data, context={"width": 0.1524}))
