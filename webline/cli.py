@@ -17,6 +17,7 @@ COMMANDS = {
     "export-ssp": ("orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
     "validate": ("orchestrator.validate_cmd", "check a line layout (file:line: field: reason), print its operating point"),
     "diagnose": ("diagnosis.diagnose_cmd", "find the unmodelled effect behind a model-vs-measured tension gap"),
+    "diagnose-bench": ("diagnosis.benchmark_cmd", "benchmark webline diagnose on lines with hidden effects"),
 }
 
 
