@@ -370,6 +370,5 @@ def json_schema():
     """JSON schema of a layout file (for editors), as written to docs/layout.schema.json."""
     schema = Layout.model_json_schema(by_alias=True)
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema["$id"] = "https://github.com/webline/webline/docs/layout.schema.json"
     schema["title"] = "webline line layout"
     return schema
