@@ -112,11 +112,15 @@ def to_si(text):
 
 
 def as_text(value):
-    """The override string for a YAML value (numbers as written, strings unchanged)."""
+    """The override string for a YAML value: strings unchanged, numbers as written,
+    mappings and lists as one-line YAML (the layout reads an override string as YAML)."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
         return repr(value)
+    if isinstance(value, (dict, list)):
+        import yaml
+        return yaml.safe_dump(value, default_flow_style=True, width=10 ** 6).strip()
     return str(value)
 
 
@@ -202,9 +206,8 @@ def _grid_values(path, key, spec):
     if isinstance(spec, list):
         if not spec:
             raise SweepError(path, where, "empty list of values")
-        bad = [v for v in spec if isinstance(v, (dict, list)) or v is None]
-        if bad:
-            raise SweepError(path, where, f"values must be numbers or strings (got {bad[0]!r})")
+        if any(v is None for v in spec):
+            raise SweepError(path, where, "a value is empty (null)")
         return [as_text(v) for v in spec]
     raise SweepError(path, where, "must be a list of values or {start, stop, num}")
 
@@ -306,8 +309,8 @@ def load_sweep(path):
         raise SweepError(path, "set", "must be a mapping dotted key -> value")
     for k, v in fixed.items():
         _dotted(path, "set", k)
-        if isinstance(v, (dict, list)) or v is None:
-            raise SweepError(path, f"set.{k}", f"must be a number or a string (got {v!r})")
+        if v is None:
+            raise SweepError(path, f"set.{k}", "empty value (null)")
     fixed = {k: as_text(v) for k, v in fixed.items()}
 
     if ("grid" in data) == ("monte_carlo" in data):

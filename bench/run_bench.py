@@ -1,0 +1,481 @@
+"""webline benchmark (``make bench``): one process, one run, so that ratios hold on a noisy machine.
+
+Measures, in this order, and writes ``bench/results.json`` plus a table on stdout:
+
+1. **rtf** - real-time factor (simulated s / wall s of the master loop) of
+   ``scenarios/ewl.yaml`` at its default macro step;
+2. **fmu_share** - where the master loop's wall time goes: inside the slaves'
+   Python ``do_step`` (``webline.fmi_slave.ElementSlave.do_step`` wrapped with a
+   ``perf_counter`` accumulator - pythonfmu slaves run in this interpreter), in
+   feed-through output refreshes outside ``do_step`` (getters of outputs that
+   depend on inputs), and the rest: master, ctypes/FMI boundary, recording;
+3. **scaling** - synthetic lines of 10, 20, 40, 80 path elements (generated
+   layout YAML, the EWL's element types and controllers): wall time per
+   simulated second and its linearity in the number of elements;
+4. **cosim_vs_reference** - co-simulation (default step) against the monolithic
+   reference (``orchestrator.reference``, LSODA) at equal accuracy: both are
+   compared with a tight reference (rtol 1e-9) by the relative RMS error of the
+   load-cell tensions (``orchestrator.accuracy``); the reference's loosest rtol
+   that is at least as accurate as the co-simulation is timed;
+5. **diagnose** - ``webline diagnose`` of one 60 s run (the out-of-round EWL
+   as "measured", diagnosed against the nominal EWL), in a subprocess with a
+   time limit; "not available" if the command does not exist.
+
+Simulated durations are chosen to keep the whole bench near 10 minutes on a
+2-core machine; ``--quick`` shortens everything (a smoke test of the bench).
+No timing is asserted anywhere: the numbers are a record, not a test.
+"""
+import argparse
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+SCEN = ROOT / "scenarios"
+OUT_JSON = ROOT / "bench" / "results.json"
+
+
+# ---- machine ------------------------------------------------------------------------
+def machine_info():
+    cpu = platform.processor() or ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    physical = None
+    try:
+        out = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
+        kv = dict(l.split(":", 1) for l in out.splitlines() if ":" in l)
+        physical = int(kv["Core(s) per socket"].strip()) * int(kv.get("Socket(s)", "1").strip())
+    except Exception:
+        pass
+    try:
+        affinity = len(os.sched_getaffinity(0))
+    except AttributeError:
+        affinity = os.cpu_count()
+    versions = {}
+    for mod in ("numpy", "scipy", "fmpy", "pythonfmu"):
+        try:
+            versions[mod] = __import__(mod).__version__
+        except Exception:
+            versions[mod] = None
+    try:
+        commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+                                capture_output=True, text=True, timeout=10).stdout.strip()
+    except Exception:
+        commit = ""
+    try:
+        load = os.getloadavg()
+    except OSError:
+        load = None
+    return {"cpu_model": cpu, "logical_cores": os.cpu_count(), "physical_cores": physical,
+            "usable_cores": affinity, "python": platform.python_version(),
+            "implementation": platform.python_implementation(), "platform": platform.platform(),
+            "versions": versions, "git_commit": commit, "load_avg_at_start": load,
+            "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+
+
+# ---- helpers ------------------------------------------------------------------------
+def fmus():
+    from fmus.build import build_all
+    return build_all(log=lambda m: print(f"  {m}", file=sys.stderr))
+
+
+def run(system, fmu_paths):
+    """simulate(); (result, loop wall s, setup wall s, total wall s)."""
+    from orchestrator.master import simulate
+    t = time.perf_counter()
+    r = simulate(system, fmu_paths=fmu_paths, progress=False)
+    total = time.perf_counter() - t
+    if r.status != "ok":
+        raise RuntimeError(f"simulation failed: {r.message[:600]}")
+    return r, float(r.meta["wall_time"]), float(r.meta.get("setup_time", math.nan)), total
+
+
+def n_fmus(system):
+    return len(system.components)
+
+
+# ---- 1 + 2: real-time factor and the share outside do_step ---------------------------
+def bench_rtf(fmu_paths, duration):
+    from orchestrator.layout import load_system
+    system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"})
+    r, loop, setup, total = run(system, fmu_paths)
+    sim = float(r.time[-1] - r.time[0])
+    return {"scenario": "scenarios/ewl.yaml", "duration_s": sim, "step_s": system.experiment.step,
+            "algorithm": system.experiment.algorithm, "n_fmus": n_fmus(system),
+            "loop_wall_s": loop, "setup_wall_s": setup, "total_wall_s": total,
+            "rtf": sim / loop, "rtf_incl_setup": sim / total,
+            "us_per_macro_step": 1e6 * loop / round(sim / system.experiment.step),
+            "us_per_fmu_step": 1e6 * loop / round(sim / system.experiment.step) / n_fmus(system)}
+
+
+class DoStepTimer:
+    """Wraps ElementSlave.do_step and the feed-through output refresh with perf_counter
+    accumulators (the FMUs' Python code runs in this interpreter)."""
+
+    def __init__(self):
+        import webline.fmi_slave as fs
+        self.cls = fs.ElementSlave
+        self.do_step_orig = self.cls.do_step
+        self.refresh_orig = self.cls._refresh_outputs
+        self.t_step = self.t_refresh = 0.0
+        self.n_step = self.n_refresh = 0
+        self.inside = False
+
+    def __enter__(self):
+        pc, timer = time.perf_counter, self
+        step_orig, refresh_orig = self.do_step_orig, self.refresh_orig
+
+        def do_step(slave, current_time, step_size):
+            timer.inside = True
+            t = pc()
+            try:
+                return step_orig(slave, current_time, step_size)
+            finally:
+                timer.t_step += pc() - t
+                timer.n_step += 1
+                timer.inside = False
+
+        def refresh(slave):
+            if timer.inside:
+                return refresh_orig(slave)
+            t = pc()
+            try:
+                return refresh_orig(slave)
+            finally:
+                timer.t_refresh += pc() - t
+                timer.n_refresh += 1
+
+        self.cls.do_step = do_step
+        self.cls._refresh_outputs = refresh
+        return self
+
+    def __exit__(self, *exc):
+        self.cls.do_step = self.do_step_orig
+        self.cls._refresh_outputs = self.refresh_orig
+
+
+def bench_fmu_share(fmu_paths, duration):
+    from orchestrator.layout import load_system
+    system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"})
+    with DoStepTimer() as timer:
+        r, loop, _, _ = run(system, fmu_paths)
+    steps = round(float(r.time[-1] - r.time[0]) / system.experiment.step)
+    expected = steps * n_fmus(system)
+    if timer.n_step < 0.99 * expected:
+        return {"error": f"do_step wrapper saw {timer.n_step} calls, expected {expected}: "
+                         "the FMUs do not use this process's webline.fmi_slave"}
+    inside = timer.t_step + timer.t_refresh
+    return {"scenario": "scenarios/ewl.yaml", "duration_s": steps * system.experiment.step,
+            "loop_wall_s": loop, "do_step_s": timer.t_step, "do_step_calls": timer.n_step,
+            "us_per_do_step": 1e6 * timer.t_step / max(1, timer.n_step),
+            "refresh_outputs_s": timer.t_refresh, "refresh_calls": timer.n_refresh,
+            "share_in_do_step": timer.t_step / loop,
+            "share_in_feedthrough_refresh": timer.t_refresh / loop,
+            "share_outside_fmu_python": 1.0 - inside / loop,
+            "share_outside_do_step": 1.0 - timer.t_step / loop,
+            "note": "timed with wrappers (adds ~0.2 us per call); the rest is the master loop, "
+                    "the ctypes/pythonfmu FMI boundary and recording"}
+
+
+# ---- 3: scaling with line length ----------------------------------------------------
+def synthetic_layout(n, duration):
+    """Layout data of a line with ``n`` path elements built from the EWL's element types:
+    unwind, idlers, unwind load-cell roller, S-wrap-like speed master, idlers, rewind
+    load-cell roller, rewind; tension loops in the unwind and rewind zones."""
+    import yaml
+    ewl = yaml.safe_load((SCEN / "ewl.yaml").read_text())
+    by_name = {e["name"]: e for e in ewl["path"]}
+    if n < 6:
+        raise ValueError("a synthetic line needs at least 6 elements")
+    idle = {k: v for k, v in by_name["idler_u1"].items() if k != "name"}
+    idle["span"] = "0.8 m"
+    lc_roller = {k: v for k, v in by_name["roller9"].items() if k != "name"}
+    lc_roller["span"] = "0.8 m"
+    master = {k: v for k, v in by_name["sw_leader"].items() if k != "name"}
+    master["span"] = "0.8 m"
+    n_idle = n - 5
+    a = n_idle // 2
+    path = [dict(by_name["unwind"], span="0.8 m")]
+    path += [dict(idle, name=f"idler_a{i + 1}") for i in range(a)]
+    path += [dict(lc_roller, name="lc_roller_u"), dict(master, name="master")]
+    path += [dict(idle, name=f"idler_b{i + 1}") for i in range(n_idle - a)]
+    path += [dict(lc_roller, name="lc_roller_r"), dict(by_name["rewind"])]
+    assert len(path) == n
+    speed = ewl["drives"]["speed_loops"]
+    return {
+        "name": f"synthetic_{n}", "description": f"synthetic line of {n} path elements (bench)",
+        "units": ewl.get("units", {}), "web": ewl["web"], "path": path,
+        "drives": {"master": "master",
+                   "speed_loops": {"unwind": speed["unwind"], "master": speed["sw_leader"],
+                                   "rewind": speed["rewind"]},
+                   "tension_loops": {
+                       "unwind_zone": dict(ewl["drives"]["tension_loops"]["unwind_zone"], load_cell="lc_u"),
+                       "rewind_zone": dict(ewl["drives"]["tension_loops"]["rewind_zone"], load_cell="lc_r")}},
+        "sensors": {"lc_u": dict(ewl["sensors"]["lc9"], roller="lc_roller_u"),
+                    "lc_r": dict(ewl["sensors"]["lc19"], roller="lc_roller_r")},
+        "experiment": dict(ewl["experiment"], duration=f"{duration} s"),
+    }
+
+
+def bench_scaling(fmu_paths, sizes, duration, workdir):
+    import yaml
+    from orchestrator.layout import load_system
+    rows = []
+    for n in sizes:
+        path = Path(workdir) / f"synthetic_{n}.yaml"
+        path.write_text(yaml.safe_dump(synthetic_layout(n, duration), sort_keys=False))
+        system = load_system(path)
+        r, loop, setup, _ = run(system, fmu_paths)
+        sim = float(r.time[-1] - r.time[0])
+        rows.append({"elements": n, "n_fmus": n_fmus(system), "n_connections": len(system.connections),
+                     "duration_s": sim, "loop_wall_s": loop, "setup_wall_s": setup,
+                     "wall_per_sim_s": loop / sim, "rtf": sim / loop})
+        print(f"  scaling: {n} elements ({n_fmus(system)} FMUs): {loop / sim:.2f} s wall per simulated s",
+              file=sys.stderr)
+    import numpy as np
+    x = np.array([r["elements"] for r in rows], float)
+    y = np.array([r["wall_per_sim_s"] for r in rows])
+    slope, icpt = np.polyfit(x, y, 1)
+    fit = slope * x + icpt
+    per = y / x
+    return {"rows": rows,
+            "linear_fit": {"s_per_element_per_sim_s": float(slope), "intercept_s": float(icpt),
+                           "max_rel_residual": float(np.max(np.abs(y - fit) / y))},
+            "ratio_largest_to_smallest": float(y[-1] / y[0]),
+            "element_ratio": float(x[-1] / x[0]),
+            "per_element_cost_ratio": float(per[-1] / per[0]),
+            "doubling_ratios": [float(y[i + 1] / y[i]) for i in range(len(y) - 1)],
+            "note": "linear: doubling ratios near 2 (below 2 while a fixed per-step cost still shows)"}
+
+
+# ---- 4: co-simulation vs monolithic reference at equal accuracy ----------------------
+def bench_cosim_vs_reference(fmu_paths, duration, rtols):
+    from orchestrator.accuracy import load_cells, relative_rms, without_noise
+    from orchestrator.layout import load_system
+    from orchestrator.reference import simulate_reference
+    system = without_noise(load_system(SCEN / "ewl_out_of_round.yaml",
+                                       {"experiment.duration": f"{duration} s"}))
+    cols = load_cells(system)
+    t = time.perf_counter()
+    truth = simulate_reference(system, rtol=1e-9)
+    truth_wall = time.perf_counter() - t
+    r, loop, setup, total = run(system, fmu_paths)
+    n = min(len(r.time), len(truth.time))
+
+    def err(res):
+        return max(relative_rms(res[c][:n], truth[c][:n]) for c in cols)
+    e_cs = err(r)
+    refs = []
+    for rtol in rtols:
+        t = time.perf_counter()
+        try:
+            ref = simulate_reference(system, rtol=rtol)
+            wall = time.perf_counter() - t
+            refs.append({"rtol": rtol, "wall_s": wall, "rel_rms_error": err(ref),
+                         "nfev": ref.info.get("nfev")})
+        except Exception as exc:
+            refs.append({"rtol": rtol, "error": f"{type(exc).__name__}: {exc}"[:300]})
+    ok = [x for x in refs if "wall_s" in x and x["rel_rms_error"] <= e_cs]
+    match = max(ok, key=lambda x: x["rtol"]) if ok else None
+    out = {"scenario": "scenarios/ewl_out_of_round.yaml (load-cell noise off)", "duration_s": duration,
+           "truth": {"rtol": 1e-9, "wall_s": truth_wall},
+           "cosim": {"step_s": system.experiment.step, "algorithm": system.experiment.algorithm,
+                     "loop_wall_s": loop, "total_wall_s": total, "rel_rms_error": e_cs},
+           "reference_sweep": refs,
+           "metric": "max over load cells of RMS(T - T_truth)/RMS(T_truth)"}
+    if match:
+        out["reference_at_equal_accuracy"] = match
+        out["cosim_total_over_reference_wall"] = total / match["wall_s"]
+    else:
+        out["reference_at_equal_accuracy"] = None
+        out["note"] = "no reference rtol in the sweep was as accurate as the co-simulation"
+    return out
+
+
+# ---- 5: webline diagnose on one 60 s run ----------------------------------------------
+def bench_diagnose(fmu_paths, duration, timeout, workdir):
+    from webline.cli import COMMANDS
+    if "diagnose" not in COMMANDS:
+        return {"status": "not available", "reason": "no 'webline diagnose' command in webline/cli.py"}
+    import numpy as np
+    from orchestrator.layout import load_system
+    work = Path(workdir) / "diagnose"
+    work.mkdir(parents=True, exist_ok=True)
+    # the "measured" run: the out-of-round EWL, recorded every 5 ms
+    system = load_system(SCEN / "ewl_out_of_round.yaml",
+                         {"experiment.duration": f"{duration} s", "experiment.output_interval": "5 ms"})
+    t = time.perf_counter()
+    r, loop, _, _ = run(system, fmu_paths)
+    gen_wall = time.perf_counter() - t
+    cols = [c for c in r.columns if c.startswith("lc") and c.endswith(".T")]
+    with open(work / "measured.csv", "w") as f:
+        f.write("time [s]," + ",".join(f"{c} [N]" for c in cols) + "\n")
+        data = np.column_stack([r.time] + [r[c] for c in cols])
+        np.savetxt(f, data, delimiter=",", fmt="%.9g")
+    (work / "run.yaml").write_text(
+        "data: measured.csv\nname: ewl_out_of_round_60s\n"
+        f"experiment:\n  line_speed: 200 ft/min\n  duration: {duration} s\n")
+    cmd = [sys.executable, "-m", "webline.cli", "diagnose", str(SCEN / "ewl.yaml"), str(work / "run.yaml"),
+           "--out", str(work / "report"), "--quiet"]
+    t = time.perf_counter()
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    except subprocess.TimeoutExpired:
+        return {"status": f"timed out after {timeout:.0f} s", "data_generation_wall_s": gen_wall,
+                "run_duration_s": duration, "command": " ".join(cmd[2:])}
+    wall = time.perf_counter() - t
+    out = {"status": "ok" if p.returncode == 0 else f"exit {p.returncode}", "wall_s": wall,
+           "run_duration_s": duration, "data_generation_wall_s": gen_wall,
+           "verdict": p.stdout.strip().splitlines()[0][:300] if p.stdout.strip() else "",
+           "command": " ".join(cmd[2:])}
+    if p.returncode != 0:
+        out["stderr_tail"] = p.stderr[-600:]
+    return out
+
+
+# ---- report -------------------------------------------------------------------------
+def _f(x, fmt="{:.3g}"):
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
+
+
+def table(res):
+    m = res["machine"]
+    lines = [f"webline bench  {m['date']}  commit {m['git_commit']}",
+             f"machine: {m['cpu_model']}, {m['logical_cores']} logical / {m['physical_cores']} physical cores, "
+             f"Python {m['python']}", ""]
+    add = lines.append
+    r = res.get("rtf", {})
+    if r.get("status") == "skipped":
+        add("rtf: skipped")
+        r = {}
+    if "error" in r:
+        add(f"real-time factor: ERROR {r['error']}")
+    elif r:
+        add(f"real-time factor, ewl.yaml ({r['n_fmus']} FMUs, step {r['step_s'] * 1e3:g} ms, {r['algorithm']}, "
+            f"{r['duration_s']:g} s): {r['rtf']:.3f}  ({r['us_per_macro_step']:.0f} us/macro step, "
+            f"{r['us_per_fmu_step']:.1f} us per FMU step; setup {r['setup_wall_s']:.2f} s)")
+    s = res.get("fmu_share", {})
+    if s.get("status") == "skipped":
+        add("fmu_share: skipped")
+        s = {}
+    if "error" in s:
+        add(f"share outside do_step: ERROR {s['error']}")
+    elif s:
+        add(f"loop wall split: do_step {100 * s['share_in_do_step']:.1f} %, feed-through refresh "
+            f"{100 * s['share_in_feedthrough_refresh']:.1f} %, outside the FMUs' Python "
+            f"{100 * s['share_outside_fmu_python']:.1f} %  (outside do_step: {100 * s['share_outside_do_step']:.1f} %; "
+            f"{s['us_per_do_step']:.1f} us per do_step)")
+    sc = res.get("scaling", {})
+    if sc.get("status") == "skipped":
+        add("scaling: skipped")
+        sc = {}
+    if "error" in sc:
+        add(f"scaling: ERROR {sc['error']}")
+    elif sc:
+        add("")
+        add(f"{'elements':>8} {'FMUs':>5} {'wall s / sim s':>15} {'RTF':>7}")
+        for row in sc["rows"]:
+            add(f"{row['elements']:>8} {row['n_fmus']:>5} {row['wall_per_sim_s']:>15.3f} {row['rtf']:>7.3f}")
+        lf = sc["linear_fit"]
+        add(f"linearity: {sc['element_ratio']:.0f}x elements -> {sc['ratio_largest_to_smallest']:.2f}x time; "
+            f"doubling ratios {', '.join(f'{x:.2f}' for x in sc['doubling_ratios'])}; fit "
+            f"{lf['s_per_element_per_sim_s'] * 1e3:.1f} ms/element + {lf['intercept_s'] * 1e3:.0f} ms per sim s, "
+            f"max residual {100 * lf['max_rel_residual']:.1f} %")
+    c = res.get("cosim_vs_reference", {})
+    if c.get("status") == "skipped":
+        add("cosim_vs_reference: skipped")
+        c = {}
+    if "error" in c:
+        add(f"co-sim vs reference: ERROR {c['error']}")
+    elif c:
+        add("")
+        cs = c["cosim"]
+        add(f"co-sim vs monolithic reference ({c['duration_s']:g} s of ewl_out_of_round): co-sim "
+            f"{cs['total_wall_s']:.2f} s wall (loop {cs['loop_wall_s']:.2f} s), rel. RMS error {_f(cs['rel_rms_error'])}")
+        for x in c["reference_sweep"]:
+            if "wall_s" in x:
+                add(f"   reference rtol {x['rtol']:.0e}: {x['wall_s']:.2f} s, rel. RMS error {_f(x['rel_rms_error'])}")
+            else:
+                add(f"   reference rtol {x['rtol']:.0e}: {x['error']}")
+        m_ = c.get("reference_at_equal_accuracy")
+        if m_:
+            add(f"   equal accuracy: reference rtol {m_['rtol']:.0e} in {m_['wall_s']:.2f} s; "
+                f"co-sim/reference wall = {c['cosim_total_over_reference_wall']:.2f}")
+        else:
+            add(f"   {c.get('note', '')}")
+    d = res.get("diagnose", {})
+    if d:
+        add("")
+        if d.get("status") == "ok":
+            add(f"webline diagnose, one {d['run_duration_s']:g} s run: {d['wall_s']:.1f} s wall "
+                f"(+ {d['data_generation_wall_s']:.1f} s to simulate the 'measured' run); {d.get('verdict', '')}")
+        else:
+            add(f"webline diagnose: {d.get('status')} {d.get('reason', '')}{d.get('error', '')}")
+    add("")
+    add(f"bench wall time: {res['bench_wall_s']:.0f} s")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="short runs only (smoke test of the bench)")
+    ap.add_argument("--out", type=Path, default=OUT_JSON, help=f"results file (default {OUT_JSON})")
+    ap.add_argument("--skip", nargs="*", default=[],
+                    choices=["rtf", "fmu_share", "scaling", "cosim_vs_reference", "diagnose"])
+    ap.add_argument("--diagnose-timeout", type=float, default=None, help="s (default: what is left of 10 min, >= 60 s)")
+    args = ap.parse_args(argv)
+    q = args.quick
+    cfg = {"rtf_duration": 0.5 if q else 5.0, "share_duration": 0.3 if q else 2.0,
+           "scaling_sizes": [10, 20] if q else [10, 20, 40, 80], "scaling_duration": 0.2 if q else 1.0,
+           "compare_duration": 0.3 if q else 2.0,
+           "compare_rtols": [1e-3, 1e-5] if q else [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8],
+           "diagnose_duration": 60.0, "budget_s": 600.0}
+    t0 = time.perf_counter()
+    res = {"machine": machine_info(), "config": cfg}
+    print(f"bench on {res['machine']['cpu_model']} ({res['machine']['logical_cores']} cores), "
+          f"Python {res['machine']['python']}", file=sys.stderr)
+    paths = fmus()
+    with tempfile.TemporaryDirectory(prefix="webline_bench_") as work:
+        steps = [("rtf", lambda: bench_rtf(paths, cfg["rtf_duration"])),
+                 ("fmu_share", lambda: bench_fmu_share(paths, cfg["share_duration"])),
+                 ("scaling", lambda: bench_scaling(paths, cfg["scaling_sizes"], cfg["scaling_duration"], work)),
+                 ("cosim_vs_reference", lambda: bench_cosim_vs_reference(paths, cfg["compare_duration"],
+                                                                         cfg["compare_rtols"])),
+                 ("diagnose", lambda: bench_diagnose(
+                     paths, cfg["diagnose_duration"],
+                     args.diagnose_timeout or max(60.0, cfg["budget_s"] - (time.perf_counter() - t0)), work))]
+        for name, fn in steps:
+            if name in args.skip or (q and name == "diagnose"):
+                res[name] = {"status": "skipped"}
+                continue
+            print(f"bench: {name} ...", file=sys.stderr)
+            t = time.perf_counter()
+            try:
+                res[name] = fn()
+            except Exception as exc:
+                import traceback
+                traceback.print_exc()
+                res[name] = {"error": f"{type(exc).__name__}: {exc}"[:800]}
+            res[name]["bench_section_wall_s"] = time.perf_counter() - t
+    res["bench_wall_s"] = time.perf_counter() - t0
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(res, indent=1, default=float))
+    print(table(res))
+    print(f"\n-> {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
