@@ -151,6 +151,18 @@ def harmonic_markers(result, window=None):
     return out
 
 
+def _merge_markers(markers, rel=2e-3):
+    """Markers sorted by frequency; elements turning at the same frequency (within
+    ``rel``) share one marker: [("a, b", f), ...]."""
+    out = []
+    for label, f in sorted(markers, key=lambda m: m[1]):
+        if out and abs(f - out[-1][2]) <= rel * max(abs(f), 1e-12):
+            out[-1][0].append(label)
+        else:
+            out.append([[label], f, f])
+    return [(", ".join(labels), f) for labels, f, _ in out]
+
+
 def plot_results(result, out_dir, window=None, fmax=None):
     """Write ``timeseries.png`` and ``spectra.png`` into ``out_dir``; returns their paths."""
     import matplotlib
@@ -214,7 +226,7 @@ def plot_results(result, out_dir, window=None, fmax=None):
         else:
             ax.text(0.5, 0.5, "no tension columns", transform=ax.transAxes, ha="center")
         ymax = ax.get_ylim()[1]
-        for i, (label, fm) in enumerate(sorted(markers, key=lambda m: m[1])):
+        for i, (label, fm) in enumerate(_merge_markers(markers)):
             if fm <= fmax:
                 ax.axvline(fm, color=f"C{i % 10}", ls="--", lw=0.8)
                 ax.text(fm, ymax * (0.95 - 0.1 * (i % 4)), f" {label} {fm:.3g} Hz", color=f"C{i % 10}",
