@@ -105,6 +105,7 @@ Time = Q("time")
 PositiveTime = Q("time", gt=0)
 NonNegTime = Q("time", ge=0)
 Speed = Q("speed", ge=0)
+PositiveSpeed = Q("speed", gt=0)
 Acceleration = Q("acceleration", gt=0)
 Tension = Q("tension", ge=0)
 TensionRate = Q("tension_rate", gt=0)
@@ -256,7 +257,7 @@ class TensionLoop(Strict):
     load_cell: Name = _doc("Sensor (or load_cell_roller) giving the feedback; inside the zone")
     K: TensionGain = _doc("Gain with explicit unit, e.g. '2 (ft/min)/lbf'")
     w_i: NonNegRate = _doc("Integral corner frequency w_t (1/s)", default=10.0)
-    trim_limit: Optional[Q("speed", gt=0)] = _doc("Symmetric speed-trim limit (default none)", default=None)
+    trim_limit: Optional[PositiveSpeed] = _doc("Symmetric speed-trim limit (default none)", default=None)
 
 
 class Drives(Strict):
@@ -339,12 +340,15 @@ class Experiment(Strict):
                                                    default_factory=dict)
 
 
+SpeedUnit, ForceUnit, LengthUnit, TorqueUnit = (_unit_of(d) for d in ("speed", "force", "length", "torque"))
+
+
 class DisplayUnits(Strict):
     """Units in which reports and plots show values (the model runs in SI)."""
-    speed: Optional[_unit_of("speed")] = _doc("e.g. 'ft/min'", default=None)
-    tension: Optional[_unit_of("force")] = _doc("e.g. 'lbf'", default=None)
-    length: Optional[_unit_of("length")] = _doc("e.g. 'in'", default=None)
-    torque: Optional[_unit_of("torque")] = _doc("e.g. 'lbf*ft'", default=None)
+    speed: Optional[SpeedUnit] = _doc("e.g. 'ft/min'", default=None)
+    tension: Optional[ForceUnit] = _doc("e.g. 'lbf'", default=None)
+    length: Optional[LengthUnit] = _doc("e.g. 'in'", default=None)
+    torque: Optional[TorqueUnit] = _doc("e.g. 'lbf*ft'", default=None)
 
 
 class Layout(Strict):
