@@ -10,7 +10,15 @@ import yaml
 from orchestrator.layout import build_system, json_schema, load_layout, load_system
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENARIOS = sorted((ROOT / "scenarios").rglob("*.yaml"))
+
+
+def _is_layout(path):
+    """Layout files (not sweep files, which name a ``layout`` to run)."""
+    data = yaml.safe_load(path.read_text())
+    return isinstance(data, dict) and "layout" not in data
+
+
+SCENARIOS = sorted(p for p in (ROOT / "scenarios").rglob("*.yaml") if _is_layout(p))
 PAPER = ROOT / "scenarios" / "paper"
 
 
