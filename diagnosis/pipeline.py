@@ -222,7 +222,7 @@ class Diagnosis:
             r = c.meas[s] - cols[s]
             c.resid[s] = r
             c.periodic[s] = est.split_slow_periodic(r, c.fs, c.fc)[1]
-            c.floors[s] = est.NoiseFloor(c.periodic[s][c.mask], c.fs)
+            c.floors[s] = est.NoiseFloor(c.periodic[s][c.mask], c.fs, median_hz=4.0)
 
     def _angle(self, c, k):
         """Angle of candidate ``k`` in run ``c``: from the data if it has one, else the model's."""
@@ -326,14 +326,17 @@ class Diagnosis:
             return None
         th = c.theta[key] if theta is None else theta
         m = c.mask
-        out = {"orders": orders, "Y": {}, "E": {}, "z": 0.0, "n": 0}
+        out = {"orders": orders, "Y": {}, "E": {}, "z": 0.0, "n": 0, "z_order": {j: 0.0 for j in orders}}
         freqs = np.array(orders) * c.freq[key]
         for s in c.sensors:
             Y = est.fit_harmonics(resid[s], th, orders, m)
             fitted = est.harmonic_signal(th[m], Y, orders)
             out["Y"][s], out["E"][s] = Y, float(np.sum(fitted ** 2))
-            out["z"] += float(np.sum(est.harmonic_z(Y, freqs, c.floors[s], c.T)))
+            z = est.harmonic_z(Y, freqs, c.floors[s], c.T)
+            out["z"] += float(np.sum(z))
             out["n"] += len(orders)
+            for j, zj in zip(orders, z):
+                out["z_order"][j] += float(zj)
         return out
 
     def which(self):
@@ -357,7 +360,7 @@ class Diagnosis:
         for it in range(self.opt.max_effects):
             scores = []
             for k in remaining:
-                E, z, n, fits = 0.0, 0.0, 0, {}
+                E, z, n, fits, zo = 0.0, 0.0, 0, {}, {}
                 for c in fit:
                     th = self._theta_refined(c, k)
                     ff = self._family_fit(c, k.key, resid[c.name], th)
@@ -367,11 +370,17 @@ class Diagnosis:
                     E += sum(ff["E"].values())
                     z += ff["z"]
                     n += ff["n"]
+                    for j, zj in ff["z_order"].items():
+                        zo[j] = zo.get(j, 0.0) + zj
                 if n == 0:
                     continue
                 logp = est.gamma_log10_sf(z, n) + math.log10(n_tests)
+                # lowest order clearly present (an element at a sub-multiple of the true
+                # frequency explains the same lines with its higher orders only)
+                strong = [j for j, zj in sorted(zo.items()) if zj > 25.0 * len(fits)]
                 scores.append({"cand": k, "E": E, "share": E / total if total > 0 else 0.0,
-                               "logp": logp, "fits": fits, "z": z, "n": n})
+                               "logp": logp, "fits": fits, "z": z, "n": n, "z_order": zo,
+                               "lowest_order": strong[0] if strong else 99})
             scores.sort(key=lambda d: -d["E"])
             self.screen_log.append([{"element": d["cand"].element, "kind": d["cand"].kind,
                                      "share": d["share"], "log10_p": d["logp"]} for d in scores])
@@ -456,11 +465,17 @@ class Diagnosis:
                 if G is None:
                     continue
                 X, misfit = est.solve_fourier(M, G, W)
+                # orders the data does not show above the noise stay out of the model
+                e_ord = np.sum(np.abs(M) ** 2, axis=0)
+                keep = np.array([d["z_order"].get(j, 0.0) > 9.0 * max(1, len(d["fits"]))
+                                 or e_ord[j - 1] > 0.02 * np.sum(e_ord) for j in range(1, len(X) + 1)])
+                X = np.where(keep, X, 0.0)
                 ranked.append({"score": d, "cand": k, "G": G, "M": M, "W": W, "X": X, "misfit": misfit})
             if not ranked:
                 continue
-            # best pattern fit first; ties (one sensor, equal misfit) by explained energy
-            ranked.sort(key=lambda r: (round(r["misfit"], 3), -r["score"]["E"]))
+            # best pattern fit first; ties (one sensor: every element fits exactly) go to
+            # the element whose own fundamental is present, then to the energy explained
+            ranked.sort(key=lambda r: (round(r["misfit"], 2), r["score"]["lowest_order"], -r["score"]["E"]))
             self.final_effects.append({"ranked": ranked, "eff": eff})
             b = ranked[0]
             log.info("  %s: C = %s um, misfit %.3f", b["cand"].element,
@@ -563,8 +578,6 @@ class Diagnosis:
             for s in c.sensors:
                 r = est.split_slow_periodic(c.meas[s] - sim.columns[s], c.fs, c.fc)[1]
                 m = np.zeros(H, complex)
-                for i, j in enumerate(orders):
-                    pass
                 m_ord = est.fit_harmonics(r, th, orders, c.mask)
                 for i, j in enumerate(orders):
                     m[j - 1] = m_ord[i]
@@ -572,6 +585,7 @@ class Diagnosis:
         if not Ms:
             return X
         dX, _ = est.solve_fourier(np.array(Ms), b["G"], b["W"])
+        dX = np.where(np.abs(X) > 0, dX, 0.0)
         before = float(np.sum(np.abs(b["M"]) ** 2))
         after = float(np.sum(np.abs(np.array(Ms)) ** 2))
         log.info("  polish %s: remaining harmonic energy %.2g %% of measured", k.element,

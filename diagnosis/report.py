@@ -75,18 +75,18 @@ def _sub(a, b, key):
 
 def _agg(step, ctxs, s):
     """Metrics of sensor ``s`` over several runs: nrmse/fit over the joined
-    records, L1 summed, L2 root-sum-square, Linf max, spectral error mean."""
+    records, L1 and L2 (integrals) summed, Linf max, spectral error mean."""
     ms = [(c, step["metrics"][c.name][s]) for c in ctxs if s in c.sensors]
     if not ms:
         return None
     if len(ms) == 1:
-        return dict(ms[0][1])
+        return {k: v for k, v in ms[0][1].items() if k != "spectral_peaks"}
     e2 = sum((m["nrmse"] ** 2) * _var_norm2(c, s) for c, m in ms)
     d2 = sum(_var_norm2(c, s) for c, m in ms)
     nrmse = math.sqrt(e2 / d2) if d2 > 0 else float("inf")
     spe = [m["spectral_peak_error"] for _, m in ms if m.get("spectral_peak_error") is not None]
     return {"nrmse": nrmse, "fit_percent": 100 * (1 - nrmse),
-            "l1": sum(m["l1"] for _, m in ms), "l2": math.sqrt(sum(m["l2"] ** 2 for _, m in ms)),
+            "l1": sum(m["l1"] for _, m in ms), "l2": sum(m["l2"] for _, m in ms),
             "linf": max(m["linf"] for _, m in ms),
             "rms": math.sqrt(sum(m["rms"] ** 2 * len(c.t) for c, m in ms) / sum(len(c.t) for c, _ in ms)),
             "mean_error": sum(m["mean_error"] * len(c.t) for c, m in ms) / sum(len(c.t) for c, _ in ms),
@@ -326,7 +326,7 @@ def html_report(d, rep):
         parts.append("</table>")
     # gap table
     parts.append("<h2>Gap before / after</h2><table><tr><th>sensor</th><th>runs</th><th>model</th>"
-                 "<th>NRMSE</th><th>fit %</th><th>L1 (N s)</th><th>L2 (N s<sup>1/2</sup>)</th>"
+                 "<th>NRMSE</th><th>fit %</th><th>L1 (N s)</th><th>L2 (N<sup>2</sup> s)</th>"
                  "<th>L&infin; (N)</th><th>spectral peak err</th></tr>")
     for label, key in (("fit", "in_sample"), ("held out", "out_of_sample")):
         block = rep["holdout"].get(key)
