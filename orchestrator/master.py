@@ -32,8 +32,9 @@ FMU log messages are taken raw from each instance's logger callback, without
 fmpy's printf proxy: pythonfmu passes its message as the format string, and a
 ``%`` in it (a traceback, "100 %") crashed the proxy in a test.
 
-Structural problems (unknown model or variable, input fed twice, algebraic
-loop) raise :class:`SetupError` before any FMU is instantiated.
+Ctrl-C stops the run the same way (``status = "interrupted"``). Structural
+problems (unknown model or variable, input fed twice, algebraic loop) raise
+:class:`SetupError` before any FMU is instantiated.
 """
 import atexit
 import ctypes
@@ -614,6 +615,7 @@ def simulate(system, fmu_paths=None, progress=True):
     system that cannot run; an FMU failure gives a Result with
     ``status == "failed"`` and the rows recorded so far.
     """
+    t_setup = _time.perf_counter()
     if fmu_paths is None:
         from fmus.build import build_all
         fmu_paths = build_all(log=lambda m: print(m, file=sys.stderr))
@@ -645,7 +647,6 @@ def simulate(system, fmu_paths=None, progress=True):
     step = STEP[e.algorithm]
     plan.gauss_seidel = e.algorithm == "gauss-seidel"
     status, message, k = "ok", "", 0
-    t_setup = _time.perf_counter()
     t_loop, wall, setup_time = 0.0, 0.0, 0.0
     bar = None
     try:
@@ -686,6 +687,12 @@ def simulate(system, fmu_paths=None, progress=True):
             wall = _time.perf_counter() - t_loop
         except RunFailure as f:
             status, message = "failed", str(f)
+            if isinstance(f, FmiFailure) and any("KeyboardInterrupt" in m for _, m in f.slave.log):
+                # Ctrl-C landed in the FMU's Python code (same interpreter): pythonfmu made it fatal
+                status, message = "interrupted", f"interrupted at t = {f.t:.6g} s (inside {f.slave.label()})"
+            wall = _time.perf_counter() - t_loop if t_loop else 0.0
+        except KeyboardInterrupt:
+            status, message = "interrupted", f"interrupted at t = {t0 + k * h:.6g} s"
             wall = _time.perf_counter() - t_loop if t_loop else 0.0
     finally:
         if bar is not None:

@@ -104,7 +104,8 @@ def main(argv=None):
     result.meta["overrides"] = list(args.set)
     paths = result.save(out, csv=args.csv)
     if not result.ok:
-        print(f"webline run: run failed after {result.meta.get('simulated_time', 0):.6g} s:\n"
+        what = "was interrupted" if result.status == "interrupted" else "failed"
+        print(f"webline run: run {what} after {result.meta.get('simulated_time', 0):.6g} s:\n"
               f"{result.message}", file=sys.stderr)
         print(f"partial results ({len(result.time)} rows): {', '.join(map(str, paths))}", file=sys.stderr)
         return 1
