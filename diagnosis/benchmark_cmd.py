@@ -39,6 +39,8 @@ def parser():
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="cases in parallel (default 2)")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per diagnosis (default 1800)")
     ap.add_argument("--only", nargs="+", default=None, metavar="ID", help="run only these case ids (e.g. c03)")
+    ap.add_argument("--rescore", action="store_true",
+                    help="do not simulate or diagnose: score the finished cases in OUT/cases again")
     return ap
 
 
@@ -104,6 +106,24 @@ def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=
     return summary, results, meta
 
 
+def rescore(out, log=None):
+    """(summary, results, meta) of the finished case folders in ``out``/cases."""
+    from diagnosis import benchmark as B
+    folders = sorted(p for p in (Path(out) / "cases").glob("*") if (p / "truth" / "truth.json").exists())
+    results = [B.load_case(p) for p in folders]
+    summary = B.summarize(results)
+    summary["generation_failures"] = []
+    old = Path(out) / "diagnosis_results.json"
+    meta = {}
+    if old.exists():
+        try:
+            meta = json.loads(old.read_text()).get("meta", {})
+        except ValueError:
+            meta = {}
+    meta.update(rescored=True, cases=len(results), work_folder=str(out))
+    return summary, results, meta
+
+
 def write(summary, results, meta, path):
     from diagnosis import benchmark as B
     path = Path(path)
@@ -133,7 +153,10 @@ def main(argv=None):
     if n < 1 or args.jobs < 1:
         print("webline diagnose-bench: --cases and --jobs must be >= 1", file=sys.stderr)
         return 2
-    summary, results, meta = run(n, args.seed, args.out, args.quick, args.jobs, args.timeout, args.only)
+    if args.rescore:
+        summary, results, meta = rescore(args.out)
+    else:
+        summary, results, meta = run(n, args.seed, args.out, args.quick, args.jobs, args.timeout, args.only)
     path = args.results or (args.out / "diagnosis_results.json")
     md = write(summary, results, meta, path)
     print(md)
