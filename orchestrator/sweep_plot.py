@@ -81,6 +81,9 @@ def plot_sweep(out, spec=None):
         lo, hi = (min(finite), max(finite)) if finite else (0.0, 1.0)
         pad = 0.08 * (hi - lo or 1.0)
         ax.plot([lo - pad, hi + pad], [lo - pad, hi + pad], "k--", lw=0.8, label="y = x")
+        for order in (2, 3):  # a harmonic of the rotation that won the spectrum lies here
+            ax.plot([lo - pad, (hi + pad) / order], [order * (lo - pad), hi + pad], ":", color="0.6", lw=0.8,
+                    label="y = 2x, 3x (harmonics)" if order == 2 else None)
         if have_m:
             ax.plot(xs_m, ys, "o", color="C0", label=f"x = {spec.get('roll')} mean(omega)/2pi (recorded)")
         ax.plot(xs_n, ys, "o", mfc="none", color="C1", label="x = v/(2 pi R) (nominal)")

@@ -161,3 +161,57 @@ def test_fake_sweep_on_a_dask_local_cluster(tmp_path, layout):
                          progress=False, runner=FAKE)
         assert [r["status"] for r in rows] == ["ok", "error", "crashed"]
         assert "exited with code 3" in rows[2]["error"]
+
+
+# ---- the real line ----------------------------------------------------------------
+def test_bad_layout_key_is_a_sweep_error_before_any_run(tmp_path, capsys):
+    path = write(tmp_path / "s.yaml", f"""
+layout: {ROOT / "scenarios" / "ewl.yaml"}
+grid:
+  unwind.radiuss: [5 in]
+""")
+    assert sweep_cmd.main([str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: grid.unwind.radiuss:" in err and "radiuss" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_small_ewl_sweep_on_a_dask_local_cluster(tmp_path, fmus, capsys):
+    """Two 1 s runs of the EWL on a LocalCluster of 2 worker processes, through the CLI."""
+    distributed = pytest.importorskip("distributed")
+    import h5py
+    sweep_file = write(tmp_path / "speed.yaml", f"""
+name: ewl_speed
+layout: {ROOT / "scenarios" / "ewl.yaml"}
+set:
+  experiment.duration: 1 s
+  unwind.eccentricity: {{C: [0.6 mm]}}
+grid:
+  experiment.line_speed: [150 ft/min, 250 ft/min]
+metrics: {{steady_start: 0.5 s}}
+plot: {{type: frequency_vs_rotation, y: lc9.T.f_dom, roll: unwind,
+        speed: experiment.line_speed, radius: unwind.radius}}
+""")
+    out = tmp_path / "out"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        argv = [str(sweep_file), "--out", str(out), "--scheduler", cluster.scheduler_address, "--no-progress"]
+        assert sweep_cmd.main(argv) == 0, capsys.readouterr().err
+        rows = read_table(out / "sweep.csv")
+        assert [r["status"] for r in rows] == ["ok", "ok"]
+        assert [r["experiment.line_speed"] for r in rows] == ["150 ft/min", "250 ft/min"]
+        assert rows[0]["experiment.line_speed.si"] == pytest.approx(0.762)
+        R = 6.375 * 0.0254
+        for r in rows:
+            assert r["error"] == "" and r["wall_time"] > 0 and r["sim_time"] == pytest.approx(1.0)
+            for lc in ("lc9", "lc15", "lc19"):  # 15 lbf in both zones, held by the controllers
+                assert r[f"{lc}.T.mean"] == pytest.approx(15 * 4.4482216, rel=0.05)
+                assert r[f"{lc}.T.p2p"] >= 0
+            # the roll turns with the unstretched web: within 2 % of v/(2 pi R)
+            assert r["unwind.f_rot"] == pytest.approx(r["experiment.line_speed.si"] / (2 * math.pi * R), rel=0.02)
+            with h5py.File(out / r["run_dir"] / "results.h5") as f:
+                assert f["lc9.T"].shape == f["time"].shape and f["time"][-1] == pytest.approx(1.0)
+        assert (out / "frequency_vs_rotation.png").stat().st_size > 0
+        stamp = [(out / r["run_dir"] / "summary.json").stat().st_mtime_ns for r in rows]
+        assert sweep_cmd.main(argv) == 0  # finished runs are skipped
+        assert [(out / r["run_dir"] / "summary.json").stat().st_mtime_ns for r in rows] == stamp
