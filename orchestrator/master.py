@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.results import Recorder, Result
+from orchestrator.results import Recorder
 
 ALGORITHMS = ("jacobi", "gauss-seidel")
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
@@ -578,14 +578,10 @@ def _initialize(slaves, start, stop):
             s.log.append((4, f"{type(exc).__name__}: {exc}"))
             raise FmiFailure(s, "fmi2Instantiate", None, start) from exc
     for s in slaves:
-        function = "fmi2SetupExperiment"
         try:
             s.fmu.setupExperiment(startTime=start, stopTime=stop)
-            function = "fmi2SetReal (start values)"
             s.set_start_values()
-            function = "fmi2EnterInitializationMode"
             s.fmu.enterInitializationMode()
-            function = "fmi2ExitInitializationMode"
             s.fmu.exitInitializationMode()
         except FMICallException as exc:
             if exc.status >= 3:

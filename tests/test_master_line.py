@@ -149,11 +149,8 @@ EWL = ROOT / "scenarios" / "ewl_out_of_round.yaml"
 
 
 def _layout_ready():
-    try:
-        import orchestrator.layout  # noqa: F401
-    except ImportError:
-        return False
-    return EWL.exists()
+    import importlib.util
+    return importlib.util.find_spec("orchestrator.layout") is not None and EWL.exists()
 
 
 @pytest.mark.skipif(not _layout_ready(), reason="orchestrator/layout.py or the EWL scenario not there yet")
