@@ -6,6 +6,7 @@ A sweep file (YAML) names a layout and the runs to make of it::
     layout: ewl.yaml                   # relative to the sweep file
     set:                               # overrides applied to every run
       experiment.duration: 30 s
+      unwind.eccentricity: {C: [0.6 mm]}   # mappings/lists are passed as YAML text
     grid:                              # cartesian product, in file order
       unwind.radius: [4.75 in, 5.75 in, 6.75 in]
       experiment.line_speed: {start: 100 ft/min, stop: 300 ft/min, num: 3}
@@ -645,7 +646,8 @@ def _local(tasks, workers, on_done):
     from concurrent.futures.process import BrokenProcessPool
     ctx = multiprocessing.get_context("spawn")
     broken = []
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, max_tasks_per_child=1) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=ctx, max_tasks_per_child=1)
+    try:
         futures = {pool.submit(execute_run, t): t for t in tasks}
         for fut in as_completed(futures):
             try:
@@ -654,6 +656,12 @@ def _local(tasks, workers, on_done):
                 broken.append(futures[fut])
             except Exception as exc:
                 on_done(_crash_summary(futures[fut], f"{type(exc).__name__}: {exc}"))
+    except KeyboardInterrupt:  # Ctrl-C: stop the runs in flight, drop the queued ones
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        raise
+    pool.shutdown()
     for t in broken:  # one at a time: find the run that takes its process down
         with ProcessPoolExecutor(max_workers=1, mp_context=ctx, max_tasks_per_child=1) as pool:
             try:
@@ -727,8 +735,11 @@ def run_sweep(sweep, out, scheduler=None, workers=None, progress=True, force=Fal
                 _dask(todo, scheduler, on_done, isolate=isolate)
             else:
                 _local(todo, workers or os.cpu_count() or 1, on_done)
-        finally:
+        finally:  # also on Ctrl-C: the table holds what finished ("missing" for the rest)
             bar.close()
+            rows = [row(sweep, run, summaries.get(run.key), out) for run in sweep.runs]
+            write_table(out / TABLE, rows, sweep.parameters)
+        return rows
     rows = [row(sweep, run, summaries.get(run.key), out) for run in sweep.runs]
     write_table(out / TABLE, rows, sweep.parameters)
     return rows

@@ -7,7 +7,7 @@ Finished runs are skipped when the sweep is run again. Writes ``OUT/sweep.csv``
 (one row per run) and, when the sweep file has a ``plot`` section, the plot.
 
 Exit codes: 0 every run ok, 1 some run failed (recorded in sweep.csv),
-2 bad sweep file or arguments.
+2 bad sweep file or arguments, 130 interrupted (finished runs are kept).
 """
 import argparse
 import sys
@@ -42,9 +42,14 @@ def main(argv=None):
     out = args.out or Path("out") / "sweeps" / sweep.name
     if args.scheduler and args.workers:
         print("webline sweep: --workers ignored with --scheduler (the cluster decides)", file=sys.stderr)
-    rows = run_sweep(sweep, out, scheduler=args.scheduler, workers=args.workers,
-                     progress=not args.no_progress, force=args.force,
-                     retry_failed=args.retry_failed, isolate=not args.in_worker)
+    try:
+        rows = run_sweep(sweep, out, scheduler=args.scheduler, workers=args.workers,
+                         progress=not args.no_progress, force=args.force,
+                         retry_failed=args.retry_failed, isolate=not args.in_worker)
+    except KeyboardInterrupt:
+        print(f"webline sweep: interrupted; finished runs are kept in {out} "
+              "(run the same command again to continue)", file=sys.stderr)
+        return 130
     ok = sum(r["status"] == "ok" for r in rows)
     print(f"{ok} of {len(rows)} runs ok -> {out / 'sweep.csv'}")
     for r in rows:
