@@ -75,6 +75,16 @@ def test_libcosim_runs_it_and_matches(two_span_ssp):
         assert _rel_err(d[col], ref[col]) < 1e-3, col
 
 
+def test_libcosim_reads_the_step_from_the_ssd(two_span_ssp):
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    log_output_level(CosimLogLevel.ERROR)
+    ex = CosimExecution.from_ssp_file(str(two_span_ssp))  # no step given: osp:FixedStepAlgorithm
+    assert ex.num_slaves() == 2
+    assert ex.step(3)
+    assert ex.status().current_time == 3_000_000  # ns
+
+
 def test_libcosim_matches_our_master(two_span_ssp):
     from orchestrator.master import simulate
     ours = simulate(two_spans(), progress=False)  # Jacobi, as libcosim's fixed-step algorithm
