@@ -487,17 +487,30 @@ def run_diagnosis(truth, out, timeout=1800, python=None, extra=()):
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     t0 = time.perf_counter()
+    cpu0 = _children_cpu()
     try:
         p = subprocess.run(argv, cwd=blind, env=env, capture_output=True, text=True, timeout=timeout)
         rc, err = p.returncode, p.stderr
     except subprocess.TimeoutExpired as exc:
         rc, err = -9, f"timeout after {timeout} s\n{exc.stderr or ''}"
     wall = time.perf_counter() - t0
+    cpu = _children_cpu() - cpu0
     rep = None
     rp = Path(out) / "report.json"
     if rc == 0 and rp.exists():
         rep = json.loads(rp.read_text())
-    return {"report": rep, "wall_s": wall, "returncode": rc, "stderr": (err or "")[-3000:], "argv": argv}
+    return {"report": rep, "wall_s": wall, "cpu_s": cpu, "returncode": rc, "stderr": (err or "")[-3000:],
+            "argv": argv}
+
+
+def _children_cpu():
+    """CPU seconds (user + system) of the finished child processes of this process."""
+    try:
+        import resource
+        r = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return r.ru_utime + r.ru_stime
+    except (ImportError, OSError):
+        return 0.0
 
 
 # =============================================================== scoring ====
@@ -619,10 +632,12 @@ def summarize(results):
     noise_only = {"cases": 0, "false_effects": 0, "cases_with_false": 0}
     gaps_in, gaps_out, gaps_in_ecc, gaps_out_ecc, oracle_out_ecc = [], [], [], [], []
     failed = []
-    walls = []
+    walls, cpus = [], []
     for res in results:
         tr, sc = res["truth"], res["score"]
         walls.append(res.get("wall_s") or 0.0)
+        if res.get("cpu_s"):
+            cpus.append(res["cpu_s"])
         if res.get("report") is None:
             failed.append({"id": tr["id"], "returncode": res.get("returncode"),
                            "stderr_tail": (res.get("stderr") or "")[-400:]})
@@ -683,6 +698,7 @@ def summarize(results):
             "held_out_halved_periodic": {"cases": len(halved), "halved": int(sum(halved))},
         },
         "runtime_s": _stats(walls),
+        "cpu_s": _stats(cpus),
         "targets": TARGETS,
     }
     s["verdict"] = _verdicts(s)
@@ -788,8 +804,11 @@ def markdown(summary, results=None, meta=None):
              f"oracle median {_num(g['held_out_oracle_ratio_periodic']['median'])}) | <= 0.5 | "
              f"{s['verdict']['held_out_gap_halved']} |")
     rt = s["runtime_s"]
-    L.append(f"| diagnose run time per case | median {_num(rt['median'], '{:.0f}')} s, max "
-             f"{_num(rt['max'], '{:.0f}')} s | - | - |")
+    cp = s.get("cpu_s") or {"n": 0}
+    cpu_txt = (f"; CPU median {_num(cp['median'], '{:.0f}')} s, max {_num(cp['max'], '{:.0f}')} s"
+               if cp.get("n") else "")
+    L.append(f"| diagnose run time per case | wall median {_num(rt['median'], '{:.0f}')} s, max "
+             f"{_num(rt['max'], '{:.0f}')} s{cpu_txt} | - | - |")
     if s["diagnose_failures"]:
         L.append(f"| diagnose failures | {len(s['diagnose_failures'])}: "
                  f"{', '.join(f['id'] for f in s['diagnose_failures'])} | 0 | - |")
@@ -830,11 +849,11 @@ def evaluate_case(case, root, line_doc, fmu_paths=None, timeout=1800, extra=()):
     gen = time.perf_counter() - t0
     d = run_diagnosis(truth, folder / "diagnosis", timeout=timeout, extra=extra)
     rep = d["report"]
-    res = {"truth": truth, "report": rep, "wall_s": d["wall_s"], "generation_s": gen,
+    res = {"truth": truth, "report": rep, "wall_s": d["wall_s"], "cpu_s": d.get("cpu_s"), "generation_s": gen,
            "returncode": d["returncode"], "stderr": d["stderr"] if rep is None else "", "argv": d["argv"],
            "score": score_case(truth, rep), "gap": gap_of(rep, truth)}
     (folder / "result.json").write_text(json.dumps(
-        {k: res[k] for k in ("wall_s", "generation_s", "returncode", "stderr", "argv")}, indent=1))
+        {k: res[k] for k in ("wall_s", "cpu_s", "generation_s", "returncode", "stderr", "argv")}, indent=1))
     return res
 
 
