@@ -193,3 +193,24 @@ def test_profile_ramp_drives_a_span_exactly():
     i = np.searchsorted(r.time, 1.5)
     tail = T_ss + (r["s.T"][i] - T_ss) * np.exp(-1.02 * (r.time[i:] - r.time[i]))
     assert np.max(np.abs(r["s.T"][i:] - tail)) < 1e-5 * T_ss
+
+
+def test_ewl_operating_point_is_held_by_the_reference():
+    # The layout computes an operating point; the monolithic model must stay there
+    # (only angles and roll radii move), which checks layout, FMU scripts and routing together.
+    from pathlib import Path
+    layout = Path(__file__).resolve().parent.parent / "scenarios" / "ewl.yaml"
+    if not layout.exists():
+        pytest.skip("no scenarios/ewl.yaml")
+    from orchestrator.layout import load_system
+    system = load_system(layout)
+    system.experiment.stop, system.experiment.output_interval = 1.0, 0.1
+    for c in system.components:
+        if c.model == "LoadCell":
+            c.parameters["noise_std"] = 0.0
+    r = simulate_reference(system)
+    tensions = [c for c in r.columns if c.endswith(".T")]
+    assert len(tensions) > 10
+    for col in tensions:
+        assert r[col][-1] == pytest.approx(r[col][0], rel=1e-5), col
+    assert r.info["n_states"] == len(r.state_names) > 40
