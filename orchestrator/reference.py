@@ -78,7 +78,10 @@ def instantiate(component, start_time=0.0, stop_time=None):
             setter(float(value))
     slave.setup_experiment(start_time, stop_time, None)
     slave.enter_initialization_mode()
-    slave.exit_initialization_mode()  # checks parameters (ValueError naming them), builds the model
+    try:
+        slave.exit_initialization_mode()  # checks parameters (ValueError naming them), builds the model
+    except ValueError as exc:
+        raise ValueError(f"component {component.name!r} ({component.model}): {exc}") from None
     if slave.model is None:
         raise RuntimeError(f"component {component.name!r}: the FMU built no model")
     return slave
