@@ -108,7 +108,7 @@ def test_algebraic_loop_is_reported():
 
 
 def test_bad_parameters_name_the_variable():
-    with pytest.raises(ValueError, match="component .s. \(Span\): EA"):
+    with pytest.raises(ValueError, match=r"component .s. \(Span\): EA"):
         simulate_reference(System([Component("s", "Span", {"EA": -1.0})], [], Experiment(0, 0.1, 1e-3)))
     with pytest.raises(KeyError, match="no_such"):
         ReferenceSystem(System([Component("s", "Span", {"no_such": 1.0})], []))
