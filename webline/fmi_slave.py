@@ -195,11 +195,12 @@ class ElementSlave(Fmi2Slave):
         super().__init__(**kwargs)
         self.failed = False
         self.model = None
-        self.time = 0.0
-        # Time since each input was last set: an extrapolated input (an angle)
-        # advances from its own setting time, whichever other inputs a master sets.
-        self.since_set = {}
+        self.time = self.start_time = 0.0
+        # Time at which each extrapolated input (an angle) was last set: it advances
+        # from its own setting time, whichever other inputs a master sets.
+        self.set_time = {}
         self.x = []
+        self.dirty = True  # feed-through outputs need recomputing before they are read
         for v in self.parameters():
             self._declare(v, Fmi2Causality.parameter, Fmi2Variability.fixed, None)
         for v in self.INPUTS:
@@ -217,21 +218,15 @@ class ElementSlave(Fmi2Slave):
         attr = v.attr
 
         def get():
-            if refresh and self.model is not None and not self.failed:
-                try:
-                    self._refresh_outputs()
-                except Exception:
-                    # An exception in a getter would reach the host as fmi2Fatal
-                    # "unknown error"; log it, keep the last value, fail the next step.
-                    self.failed = True
-                    self.log(f"{self.instance_name}: computing outputs at t={self.time:.6g} s failed\n"
-                             f"{traceback.format_exc()}", Fmi2Status.error)
+            if refresh:
+                self._refresh_if_dirty()
             return getattr(self, attr)
 
         def set_(value):
             setattr(self, attr, value)
             if is_input:
-                self.since_set[attr] = 0.0
+                self.set_time[attr] = self.time
+                self.dirty = True
 
         self.register_variable(Real(
             v.name, causality=causality, variability=variability, initial=initial,
@@ -248,7 +243,7 @@ class ElementSlave(Fmi2Slave):
     # ---- lifecycle -----------------------------------------------------------------
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         # Outputs computed at initialisation (a profile's value) belong to the start time.
-        self.time = float(start_time or 0.0)
+        self.time = self.start_time = float(start_time or 0.0)
 
     def exit_initialization_mode(self):
         problems = []
@@ -293,43 +288,99 @@ class ElementSlave(Fmi2Slave):
         linearly from the time they were set."""
         attrs = self._input_attrs
         u = [getattr(self, a) for a in attrs]
-        for i, r in self._input_index:
-            u[i] += u[r] * (self.since_set.get(attrs[i], 0.0) + s)
+        if self._input_index:
+            t = self.time + s
+            set_time = self.set_time
+            for i, r in self._input_index:
+                u[i] += u[r] * (t - set_time.get(attrs[i], self.start_time))
         return u
 
     def _refresh_outputs(self):
         y = self.model.outputs(self.time, self.x, self._inputs(0.0))
         for a, value in zip(self._output_attrs, y):
             setattr(self, a, value)
+        self.dirty = False
+        return y
+
+    def _refresh_if_dirty(self):
+        if self.dirty and self.model is not None and not self.failed:
+            try:
+                self._refresh_outputs()
+            except Exception:
+                # An exception in a getter would reach the host as fmi2Fatal
+                # "unknown error"; log it, keep the last value, fail the next step.
+                self.failed = True
+                self.log(f"{self.instance_name}: computing outputs at t={self.time:.6g} s failed\n"
+                         f"{traceback.format_exc()}", Fmi2Status.error)
+
+    # Fast paths for the FMI get/set calls: pythonfmu's generic versions call a
+    # getter closure and an isinstance per scalar; a line of ~50 FMUs makes
+    # hundreds of these calls per macro step.
+    def _vr_tables(self):
+        tables = {}
+        feed = {v.attr for v in self.OUTPUTS if v.depends}
+        inputs = {v.attr for v in self.INPUTS}
+        by_name = {v.name: v.attr for v in (*self.parameters(), *self.INPUTS, *self.OUTPUTS)}
+        for vr, var in self.vars.items():
+            attr = by_name[var.name]
+            tables[vr] = (attr, attr in feed, attr in inputs)
+        self._vr = tables
+        return tables
+
+    def get_real(self, vrs):
+        table = self.__dict__.get("_vr") or self._vr_tables()
+        out = []
+        for vr in vrs:
+            attr, feed, _ = table[vr]
+            if feed and self.dirty:
+                self._refresh_if_dirty()
+            out.append(float(getattr(self, attr)))
+        return out
+
+    def set_real(self, vrs, values):
+        table = self.__dict__.get("_vr") or self._vr_tables()
+        now = self.time
+        for vr, value in zip(vrs, values):
+            attr, _, is_input = table[vr]
+            setattr(self, attr, value)
+            if is_input:
+                self.set_time[attr] = now
+        self.dirty = True
 
     def do_step(self, current_time, step_size):
         if self.failed:
             return False
         try:
             if self.x:
-                t0 = current_time
-                model, inputs = self.model, self._inputs
-                held = None if self._input_index else inputs(0.0)
+                model = self.model
+                u0 = self._inputs(0.0)
+                if self._input_index:
+                    # Extrapolated inputs move inside the step; the rest are held.
+                    moving = [(i, u0[i], u0[r]) for i, r in self._input_index]
 
-                def f(t, x):
-                    return model.derivatives(t, x, held if held is not None else inputs(t - t0))
+                    def f(t, x):
+                        u = u0[:]
+                        s = t - current_time
+                        for i, base, rate in moving:
+                            u[i] = base + rate * s
+                        return model.derivatives(t, x, u)
+                else:
+                    def f(t, x):
+                        return model.derivatives(t, x, u0)
 
                 h_max = min(self.max_step, model.max_substep(self.x))
                 self.x = integrate(f, current_time, self.x, step_size, h_max)
             self.time = current_time + step_size
-            for a in self._input_attrs:
-                self.since_set[a] = self.since_set.get(a, 0.0) + step_size
-            self._refresh_outputs()
+            y = self._refresh_outputs()
         except Exception:
             self.failed = True
             self.log(f"{self.instance_name}: step at t={current_time:.6g} s failed\n"
                      f"{traceback.format_exc()}", Fmi2Status.error)
             return False
-        for v in self.OUTPUTS:
-            value = getattr(self, v.attr)
+        for name, value in zip(self.model.OUTPUTS, y):
             if not math.isfinite(value):
                 self.failed = True
-                self.log(f"{self.instance_name}: output '{v.name}' became {value} at "
+                self.log(f"{self.instance_name}: output '{name}' became {value} at "
                          f"t={self.time:.6g} s (diverged)", Fmi2Status.error)
                 return False
         return True

@@ -58,6 +58,9 @@ class SpanModel(ElementModel):
         self.C_up, self.psi_up = list(C_up), list(psi_up)
         self.C_down, self.psi_down = list(C_down), list(psi_down)
         self.length_mode, self.f_fixed = int(round(length_mode)), f_fixed
+        # Most spans have round rollers at both ends: skip their Fourier sums.
+        self.round_up = not any(self.C_up)
+        self.round_down = not any(self.C_down)
 
     def problems(self):
         p = require_positive([], EA=self.EA, L0=self.L0)
@@ -81,8 +84,14 @@ class SpanModel(ElementModel):
         if self.length_mode == 2:
             w_up = 2.0 * math.pi * self.f_fixed
             th_up = w_up * t
-        L = self.L0 + length_offset(th_up, self.C_up, self.psi_up) + length_offset(th_dn, self.C_down, self.psi_down)
-        return L, length_rate(th_up, w_up, self.C_up, self.psi_up), length_rate(th_dn, w_dn, self.C_down, self.psi_down)
+        L, up, dn = self.L0, 0.0, 0.0
+        if not self.round_up:
+            L += length_offset(th_up, self.C_up, self.psi_up)
+            up = length_rate(th_up, w_up, self.C_up, self.psi_up)
+        if not self.round_down:
+            L += length_offset(th_dn, self.C_down, self.psi_down)
+            dn = length_rate(th_dn, w_dn, self.C_down, self.psi_down)
+        return L, up, dn
 
     def derivatives(self, t, x, u):
         L, up, dn = self.length(t, u)
