@@ -40,6 +40,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 SCEN = ROOT / "scenarios"
 OUT_JSON = ROOT / "bench" / "results.json"
+DIAGNOSE_FLAGS = ["--no-other", "--no-polish"]
 
 
 # ---- machine ------------------------------------------------------------------------
@@ -327,14 +328,18 @@ def bench_diagnose(fmu_paths, duration, timeout, workdir):
     (work / "run.yaml").write_text(
         "data: measured.csv\nname: ewl_out_of_round_60s\n"
         f"experiment:\n  line_speed: 200 ft/min\n  duration: {duration} s\n")
+    # the lighter pipeline (no screening of backlash/compliance/sensor effects, no
+    # Gauss-Newton polish): every stage is a full-length co-simulation of the run
     cmd = [sys.executable, "-m", "webline.cli", "diagnose", str(SCEN / "ewl.yaml"), str(work / "run.yaml"),
-           "--out", str(work / "report"), "--quiet"]
+           "--out", str(work / "report"), *DIAGNOSE_FLAGS]
     t = time.perf_counter()
     try:
         p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-    except subprocess.TimeoutExpired:
-        return {"status": f"timed out after {timeout:.0f} s", "data_generation_wall_s": gen_wall,
-                "run_duration_s": duration, "command": " ".join(cmd[2:])}
+    except subprocess.TimeoutExpired as exc:
+        err = exc.stderr.decode(errors="replace") if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        return {"status": f"timed out after {timeout:.0f} s (bench budget)", "data_generation_wall_s": gen_wall,
+                "run_duration_s": duration, "command": " ".join(cmd[2:]),
+                "log_tail": err.strip().splitlines()[-8:]}
     wall = time.perf_counter() - t
     out = {"status": "ok" if p.returncode == 0 else f"exit {p.returncode}", "wall_s": wall,
            "run_duration_s": duration, "data_generation_wall_s": gen_wall,
@@ -423,6 +428,8 @@ def table(res):
                 f"(+ {d['data_generation_wall_s']:.1f} s to simulate the 'measured' run); {d.get('verdict', '')}")
         else:
             add(f"webline diagnose: {d.get('status')} {d.get('reason', '')}{d.get('error', '')}")
+            if d.get("log_tail"):
+                add("   last log lines: " + " | ".join(d["log_tail"][-3:])[:400])
     add("")
     add(f"bench wall time: {res['bench_wall_s']:.0f} s")
     return "\n".join(lines)
