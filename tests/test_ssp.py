@@ -145,7 +145,11 @@ def ewl_short(tmp_path_factory):
         pytest.skip("no scenarios/ewl.yaml")
     from orchestrator.layout import load_system
     system = load_system(EWL)
+    # libcosim's fixed-step algorithm is Jacobi-like; the EWL's web-guide mode
+    # (~30 Hz, nearly undamped) needs a short step under Jacobi coupling.
     system.experiment.stop = 0.1
+    system.experiment.step = 1.0e-4
+    system.experiment.algorithm = "jacobi"
     return system, export_ssp(system, tmp_path_factory.mktemp("ewl") / "ewl.ssp")
 
 

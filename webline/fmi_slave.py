@@ -303,7 +303,9 @@ class ElementSlave(Fmi2Slave):
         return y
 
     def _refresh_if_dirty(self):
-        if self.dirty and self.model is not None and not self.failed:
+        if self.dirty and self.model is None and not self.failed:
+            self._provisional_outputs()
+        elif self.dirty and not self.failed:
             try:
                 self._refresh_outputs()
             except Exception:
@@ -312,6 +314,22 @@ class ElementSlave(Fmi2Slave):
                 self.failed = True
                 self.log(f"{self.instance_name}: computing outputs at t={self.time:.6g} s failed\n"
                          f"{traceback.format_exc()}", Fmi2Status.error)
+
+    def _provisional_outputs(self):
+        """Outputs read during initialisation mode, before the model exists.
+
+        Some hosts (libcosim) read feed-through outputs while initialising to
+        settle their start values; answer from a model built with the current
+        parameters rather than the declared start values. Invalid parameters
+        are reported by exit_initialization_mode, not here."""
+        try:
+            model = self.make_model()
+            u = [getattr(self, self._attr_of(n)) for n in model.INPUTS]
+            y = model.outputs(self.time, list(model.initial_state()), u)
+        except Exception:
+            return
+        for name, value in zip(model.OUTPUTS, y):
+            setattr(self, self._attr_of(name), value)
 
     # Fast paths for the FMI get/set calls: pythonfmu's generic versions call a
     # getter closure and an isinstance per scalar; a line of ~50 FMUs makes
