@@ -129,7 +129,10 @@ def gamma_log10_sf(z_sum, shape):
     """log10 of the probability that noise alone gives a summed z above ``z_sum``."""
     if shape <= 0:
         return 0.0
-    return float(stats.gamma.logsf(z_sum, shape) / math.log(10.0))
+    v = float(stats.gamma.logsf(z_sum, shape) / math.log(10.0))
+    if not math.isfinite(v):  # underflow far in the tail: bound by the leading term
+        v = (-z_sum + (shape - 1) * math.log(max(z_sum, 1.0)) - math.lgamma(shape)) / math.log(10.0)
+    return v
 
 
 # ---------------------------------------------------------- angle refinement ----

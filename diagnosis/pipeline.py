@@ -52,6 +52,7 @@ class Options:
     max_effects: int = 5
     significance: float = -8.0       # log10 of the false-alarm probability a family must beat
     min_share: float = 0.01          # of the periodic residual energy
+    min_coherence: float = 0.75      # phase stability of a family over the record (1/K for a transient)
     ambiguity: float = 0.85          # another family explaining this share of the best's energy is a tie
     kappa_span: float = 0.02         # speed-scale search range (+-)
     test_amplitude: float = 5e-5     # m, eccentricity of the sensitivity simulations
@@ -337,7 +338,29 @@ class Diagnosis:
             out["n"] += len(orders)
             for j, zj in zip(orders, z):
                 out["z_order"][j] += float(zj)
+        out["coherence"] = self._coherence(c, key, resid, th, orders, out)
         return out
+
+    def _coherence(self, c, key, resid, th, orders, fit):
+        """Stationarity of a family: the fit repeated on K consecutive segments of
+        the fit window gives phasors Y_k; per order |sum Y_k|^2 / (K sum |Y_k|^2)
+        is 1 for a steady harmonic (its amplitude may change, its phase not) and
+        about 1/K for noise or a transient the family merely projects onto.
+        Averaged over orders and sensors with the fitted energies as weights."""
+        idx = np.flatnonzero(c.mask)
+        revs = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi) if len(idx) > 1 else 0.0
+        K = int(min(4, revs // 1.5))
+        if K < 2:
+            return 1.0
+        segs = np.array_split(idx, K)
+        num = den = 0.0
+        for s in c.sensors:
+            Ys = np.array([est.fit_harmonics(resid[s][g], th[g], orders) for g in segs])
+            w = np.abs(fit["Y"][s]) ** 2
+            coh = np.abs(Ys.sum(axis=0)) ** 2 / (K * np.maximum(np.sum(np.abs(Ys) ** 2, axis=0), 1e-300))
+            num += float(np.sum(w * coh))
+            den += float(np.sum(w))
+        return num / den if den > 0 else 0.0
 
     def which(self):
         fit = self.fit_ctx()
@@ -360,7 +383,7 @@ class Diagnosis:
         for it in range(self.opt.max_effects):
             scores = []
             for k in remaining:
-                E, z, n, fits, zo = 0.0, 0.0, 0, {}, {}
+                E, z, n, fits, zo, coh = 0.0, 0.0, 0, {}, {}, 0.0
                 for c in fit:
                     th = self._theta_refined(c, k)
                     ff = self._family_fit(c, k.key, resid[c.name], th)
@@ -368,6 +391,7 @@ class Diagnosis:
                         continue
                     fits[c.name] = ff
                     E += sum(ff["E"].values())
+                    coh += ff["coherence"] * sum(ff["E"].values())
                     z += ff["z"]
                     n += ff["n"]
                     for j, zj in ff["z_order"].items():
@@ -380,16 +404,19 @@ class Diagnosis:
                 strong = [j for j, zj in sorted(zo.items()) if zj > 25.0 * len(fits)]
                 scores.append({"cand": k, "E": E, "share": E / total if total > 0 else 0.0,
                                "logp": logp, "fits": fits, "z": z, "n": n, "z_order": zo,
-                               "lowest_order": strong[0] if strong else 99})
+                               "lowest_order": strong[0] if strong else 99,
+                               "coherence": coh / E if E > 0 else 0.0})
             scores.sort(key=lambda d: -d["E"])
             self.screen_log.append([{"element": d["cand"].element, "kind": d["cand"].kind,
-                                     "share": d["share"], "log10_p": d["logp"]} for d in scores])
-            sig = [d for d in scores if d["logp"] < self.opt.significance and d["share"] >= self.opt.min_share]
+                                     "share": d["share"], "log10_p": d["logp"], "coherence": d["coherence"]}
+                                    for d in scores])
+            sig = [d for d in scores if d["logp"] < self.opt.significance and d["share"] >= self.opt.min_share
+                   and d["coherence"] >= self.opt.min_coherence]
             if not sig:
                 break
             best = sig[0]
             group = [best] + [d for d in scores if d is not best and d["E"] >= self.opt.ambiguity * best["E"]
-                              and d["logp"] < self.opt.significance]
+                              and d["logp"] < self.opt.significance and d["coherence"] >= self.opt.min_coherence]
             group = group[:max(1, self.opt.max_group)]
             eff = {"group": group, "best": best, "resid_before": copy.deepcopy(resid)}
             self.effects.append(eff)

@@ -132,7 +132,7 @@ def _effects(d):
         }
         out.append(eff)
     for o in getattr(d, "other", []) or []:
-        out.append({k: v for k, v in o.items() if not callable(v) and not k.startswith("_")})
+        out.append({k: v for k, v in o.items() if not callable(v) and not k.startswith("_") and k != "line"})
     return out
 
 
@@ -245,7 +245,8 @@ def _verdict(rep):
         c = ", ".join(x["element"] for x in e["candidates"]) if len(e.get("candidates", [])) > 1 else e["element"]
         f = e.get("fundamental_hz")
         parts.append(f"{e['kind']} of {c}" + (f" (f = {f:.3g} Hz)" if f else "")
-                     + f", explains {100 * e['explained_share']:.0f} % of the periodic residual")
+                     + f", explains {100 * e['explained_share']:.0f} % of the "
+                     + ("periodic residual" if e.get("harmonics") else "residual left"))
     g = []
     for s, v in rep["gap"].items():
         if v["nominal"] and v["refined"]:

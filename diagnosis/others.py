@@ -1,0 +1,395 @@
+"""Non-periodic unmodelled effects: parameter error, sensor lag, backlash, shaft compliance.
+
+Looked for only when, after the harmonic families found, a residual remains
+that is significant against the noise: a slow part (transients, offsets) or
+spectral peaks no rotating element's harmonics explain. Each candidate is a
+derived layout (``diagnosis.layout_edit``) with a test value; its simulation
+minus the nominal one is the candidate's signature:
+
+* parameter (EA, friction, inertia, tension-loop gain, speed-loop gain, each
+  scaled over the whole line) and sensor lag (load-cell filter time constant)
+  act nearly linearly for small changes: the signature is projected on the
+  residual, the projection coefficient gives the estimate;
+* backlash and compliance (per driven element: motor inertia, shaft of a
+  stiffness placing the torsional mode at an unexplained peak, dead zone) are
+  nonlinear: the residual energy left with the signature is the score, and
+  the value is refined on a short grid.
+
+The best candidate is kept if it explains a clear share of the remaining
+residual; it is then verified by simulation like every other refinement.
+"""
+import copy
+import logging
+import math
+
+import numpy as np
+
+from diagnosis import candidates as cand_mod
+from diagnosis import estimate as est
+from diagnosis import layout_edit
+from diagnosis.line_model import SimulationFailed
+
+log = logging.getLogger("webline.diagnose")
+
+MIN_Z = 50.0          # remaining residual energy / expected noise energy needed to look further
+MIN_SHARE = 0.25      # share of the remaining residual a candidate must explain
+MAX_SCREEN = 12       # screening simulations per fit run
+
+
+def _q(value, dim):
+    from orchestrator.units import quantity
+    return quantity(value, dim)
+
+
+def remaining(d):
+    """Per fit run and sensor: the residual with the found periodic families removed."""
+    out = {}
+    for c in d.fit_ctx():
+        per = d.resid_after_periodic[c.name]
+        out[c.name] = {s: (c.resid[s] - c.periodic[s]) + per[s] for s in c.sensors}
+    return out
+
+
+def _settle(c):
+    return c.t >= c.t[0] + min(1.0, 0.1 * c.run.duration)
+
+
+def significance(d, rem):
+    """(z of the slow part, z of the whole remaining residual, unexplained peak frequencies)."""
+    from diagnosis import spectra
+    z_slow = z_all = 0.0
+    n_rs = 0
+    peaks = []
+    for c in d.fit_ctx():
+        m = _settle(c)
+        for s in c.sensors:
+            fl = c.floors[s]
+            band = (fl.f >= c.fc) & (fl.f <= 0.25 * c.fs)
+            S0 = float(np.median(fl.S[band])) if band.any() else float(np.median(fl.S))
+            r = rem[c.name][s][m]
+            slow = est.lowpass(r, c.fs, c.fc)
+            N = len(r)
+            z_slow += float(np.sum(slow ** 2)) / max(N * S0 * c.fc, 1e-300)
+            z_all += float(np.sum((r - np.mean(r)) ** 2)) / max(N * S0 * 0.5 * c.fs, 1e-300)
+            n_rs += 1
+            x = (r - slow)
+            f, a = spectra.amplitude_spectrum(x, c.fs)
+            pk = spectra.spectral_peaks(f, a, fmin=max(c.fc, 2 * c.fs / len(x)), fmax=0.4 * c.fs)
+            peaks += [float(fp) for fp in pk.frequency[:5]]
+    n = max(1, n_rs)
+    return z_slow / n, z_all / n, peaks
+
+
+# --------------------------------------------------------------------- candidates ----
+def _base(d):
+    return layout_edit._plain_base(d.model.copy_doc())
+
+
+def parameter_candidates(d):
+    """[(name, kind, element, doc-edit(factor) -> doc, description)]."""
+    base = _base(d)
+    meta = d.system0.meta
+    out = []
+    EA = meta.get("web", {}).get("EA")
+    if EA:
+        def ea(doc, f, EA=EA):
+            doc = layout_edit.with_set(doc, "web.E", None)
+            return layout_edit.with_set(doc, "web.EA", f"{EA * f:.6g} N")
+        out.append(("EA", ea, {"EA": (EA, "N")}))
+    path = base.get("path", [])
+    fr = [(e["name"], _q(e.get("friction", 0.0), "rot_damping")) for e in path]
+    if any(b > 0 for _, b in fr):
+        def friction(doc, f, fr=fr):
+            for name, b in fr:
+                if b > 0:
+                    doc = layout_edit.with_set(doc, f"path.{name}.friction", f"{b * f:.6g} N*m*s/rad")
+            return doc
+        out.append(("friction", friction, {n: (b, "N*m*s/rad") for n, b in fr}))
+    J = {}
+    for c in d.system0.components:
+        if c.model in ("IdleRoller", "DrivenRoller") and "J" in c.parameters:
+            J[c.element] = ("inertia", c.parameters["J"])
+        elif c.model in ("UnwindRoll", "RewindRoll") and "J_core" in c.parameters:
+            J[c.element] = ("core_inertia", c.parameters["J_core"])
+    if J:
+        def inertia(doc, f, J=J):
+            for name, (key, j) in J.items():
+                if key == "inertia":
+                    doc = layout_edit.with_set(doc, f"path.{name}.mass", None)
+                doc = layout_edit.with_set(doc, f"path.{name}.{key}", f"{j * f:.6g} kg*m^2")
+            return doc
+        out.append(("inertia", inertia, {n: (j, "kg*m^2") for n, (_, j) in J.items()}))
+    tl = base.get("drives", {}).get("tension_loops", {}) or {}
+    if tl:
+        K = {z: _q(v["K"], "tension_gain") for z, v in tl.items()}
+
+        def tgain(doc, f, K=K):
+            for z, k in K.items():
+                doc = layout_edit.with_set(doc, f"drives.tension_loops.{z}.K", f"{k * f:.6g} (m/s)/N")
+            return doc
+        out.append(("tension_gain", tgain, {z: (k, "(m/s)/N") for z, k in K.items()}))
+    sl = base.get("drives", {}).get("speed_loops", {}) or {}
+    if sl:
+        Kr = {x: _q(v["K_ref"], "rate") for x, v in sl.items()}
+
+        def sgain(doc, f, Kr=Kr):
+            for x, k in Kr.items():
+                doc = layout_edit.with_set(doc, f"drives.speed_loops.{x}.K_ref", f"{k * f:.6g} 1/s")
+            return doc
+        out.append(("speed_gain", sgain, {x: (k, "1/s") for x, k in Kr.items()}))
+    return out
+
+
+def sensor_candidates(d):
+    base = _base(d)
+    out = []
+    for name, spec in (base.get("sensors") or {}).items():
+        tau0 = _q(spec.get("filter", 0.0), "time")
+
+        def lag(doc, tau, name=name):
+            return layout_edit.with_set(doc, f"sensors.{name}.filter", f"{max(tau, 0.0) * 1e3:.6g} ms")
+        out.append((name, tau0, lag))
+    return out
+
+
+def drive_candidates(d):
+    """Driven elements with an ideal drive: (element, load inertia, speed-loop name)."""
+    base = _base(d)
+    loops = base.get("drives", {}).get("speed_loops", {}) or {}
+    out = []
+    for c in d.system0.components:
+        if c.model in cand_mod.DRIVEN_MODELS and c.element in loops and not (loops[c.element] or {}).get("drive"):
+            J = c.parameters.get("J", c.parameters.get("J_core", 0.0))
+            if c.model in ("UnwindRoll", "RewindRoll"):
+                meta = d.system0.meta["elements"].get(c.element, {})
+                J = J + _roll_inertia(d, c)
+            out.append((c.element, max(J, 1e-6)))
+    return out
+
+
+def _roll_inertia(d, c):
+    p = c.parameters
+    return 0.5 * math.pi * p.get("rho", 0) * p.get("width", 0) * (p.get("R0", 0) ** 4 - p.get("R_core", 0) ** 4)
+
+
+def _drive_doc(doc, element, J, f_t, backlash, zeta=0.05):
+    """Motor inertia 30 % of the element's, the rest stays on the element; shaft
+    stiffness placing the torsional mode at ``f_t``; damping ratio ``zeta``."""
+    Jm = 0.3 * J
+    k = (2 * math.pi * f_t) ** 2 / (1.0 / Jm + 1.0 / J)
+    c = 2 * zeta * math.sqrt(k * Jm * J / (Jm + J))
+    return layout_edit.with_set(doc, f"drives.speed_loops.{element}.drive",
+                                {"motor_inertia": f"{Jm:.6g} kg*m^2", "stiffness": f"{k:.6g} N*m/rad",
+                                 "damping": f"{c:.6g} N*m*s/rad", "backlash": f"{backlash:.6g} rad"})
+
+
+# ------------------------------------------------------------------------- screen ----
+def screen(d):
+    """Screen the non-periodic candidates; returns a list of effect dicts (with
+    ``apply_doc``) to add to the refined layout, best first (at most one)."""
+    d.other_log = []
+    rem = remaining(d)
+    z_slow, z_all, peaks = significance(d, rem)
+    d.other_log.append({"z_slow": z_slow, "z_remaining": z_all, "unexplained_peaks_hz": peaks[:10]})
+    rr = sum(float(np.sum(rem[c.name][s][_settle(c)] ** 2)) for c in d.fit_ctx() for s in c.sensors)
+    r0 = sum(float(np.sum(c.resid[s][_settle(c)] ** 2)) for c in d.fit_ctx() for s in c.sensors)
+    rem_share = rr / r0 if r0 > 0 else 0.0
+    d.other_log[-1]["remaining_share"] = rem_share
+    look_slow = z_slow >= MIN_Z
+    look_peaks = bool(peaks) and rem_share >= 0.15 and z_all >= 2.0
+    if not (look_slow or look_peaks):
+        log.info("  remaining residual (%.0f %% of the nominal one) is noise or explained: z slow %.3g, "
+                 "z all %.3g; no other effect screened", 100 * rem_share, z_slow, z_all)
+        return []
+    log.info("  remaining residual: z slow %.3g, z all %.3g, unexplained peaks %s", z_slow, z_all,
+             ", ".join(f"{p:.3g} Hz" for p in peaks[:5]) or "none")
+    fit = d.fit_ctx()
+    doc0 = d.model.copy_doc()
+    budget = [MAX_SCREEN]
+
+    def sims(doc, label):
+        if budget[0] <= 0:
+            return None
+        budget[0] -= 1
+        out = {}
+        for c in fit:
+            try:
+                out[c.name] = d.model.simulate(c.run, doc=doc, label=label)
+            except SimulationFailed as exc:
+                log.info("  %s: %s", label, exc)
+                return None
+            except Exception as exc:  # a layout the test value makes invalid
+                log.info("  %s: not screened (%s)", label, str(exc).splitlines()[0])
+                return None
+        return out
+
+    def energies(sim_by_run, beta=None):
+        """(<rem, delta>, <delta, delta>, <rem, rem>) over the fit runs after start-up."""
+        rd = dd = rr = 0.0
+        for c in fit:
+            m = _settle(c)
+            for s in c.sensors:
+                delta = sim_by_run[c.name].columns[s][m] - c.nominal.columns[s][m]
+                r = rem[c.name][s][m]
+                rd += float(np.dot(r, delta))
+                dd += float(np.dot(delta, delta))
+                rr += float(np.dot(r, r))
+        return rd, dd, rr
+
+    results = []
+    slow_first = z_slow >= MIN_Z
+    order = []
+    if slow_first:
+        order += [("parameter", p) for p in parameter_candidates(d)]
+        order += [("sensor", s) for s in sensor_candidates(d)]
+    f_t = peaks[0] if peaks else 15.0
+    for el, J in drive_candidates(d):
+        order.append(("compliance", (el, J)))
+        order.append(("backlash", (el, J)))
+    if not slow_first:
+        order += [("sensor", s) for s in sensor_candidates(d)]
+        order += [("parameter", p) for p in parameter_candidates(d)]
+    for kind, spec in order:
+        if kind == "parameter":
+            name, edit, values = spec
+            f_test = 1.2
+            sb = sims(edit(copy.deepcopy(doc0), f_test), f"screen {name} x{f_test}")
+            if sb is None:
+                continue
+            rd, dd, rr = energies(sb)
+            beta = rd / dd if dd > 0 else 0.0
+            share = (rd * rd / dd) / rr if dd > 0 and rr > 0 else 0.0
+            factor = 1.0 + beta * (f_test - 1.0)
+            if not 0.2 <= factor <= 5.0:  # beyond a plausible error: not this parameter
+                factor, share = float(np.clip(factor, 0.2, 5.0)), 0.0
+            results.append({"kind": "parameter", "element": name, "share": share, "value": factor,
+                            "apply": (lambda doc, edit=edit, fac=factor: edit(doc, fac)),
+                            "line": {"edit": edit, "points": [(1.0, rr), (f_test, rr - 2 * rd + dd)],
+                                     "lo": 0.2, "hi": 5.0, "rr": rr, "values": values},
+                            "parameters": {k: {"nominal": v, "estimated": v * factor, "unit": u}
+                                           for k, (v, u) in values.items()},
+                            "detail": f"{name} x {factor:.3g}"})
+        elif kind == "sensor":
+            name, tau0, edit = spec
+            tau_t = tau0 + 0.02
+            sb = sims(edit(copy.deepcopy(doc0), tau_t), f"screen {name} lag")
+            if sb is None:
+                continue
+            rd, dd, rr = energies(sb)
+            beta = rd / dd if dd > 0 else 0.0
+            share = (rd * rd / dd) / rr if dd > 0 and rr > 0 else 0.0
+            tau = max(0.0, tau0 + beta * 0.02)
+            results.append({"kind": "sensor", "element": name, "share": share, "value": tau,
+                            "apply": (lambda doc, edit=edit, tau=tau: edit(doc, tau)),
+                            "line": {"edit": edit, "points": [(tau0, rr), (tau_t, rr - 2 * rd + dd)],
+                                     "lo": 0.0, "hi": 1.0, "rr": rr, "tau0": tau0},
+                            "parameters": {"filter": {"nominal": tau0, "estimated": tau, "unit": "s"}},
+                            "detail": f"{name} filter {1e3 * tau:.3g} ms"})
+        else:
+            el, J = spec
+            best = None
+            grid = [(f_t, 0.0)] if kind == "compliance" else [(30.0, math.radians(0.5)), (30.0, math.radians(2.0))]
+            for ft, bl in grid:
+                sb = sims(_drive_doc(copy.deepcopy(doc0), el, J, ft, bl), f"screen {el} {kind}")
+                if sb is None:
+                    continue
+                rd, dd, rr = energies(sb)
+                share = 1.0 - (rr - 2 * rd + dd) / rr if rr > 0 else 0.0
+                if best is None or share > best[0]:
+                    best = (share, ft, bl)
+            if best is None:
+                continue
+            share, ft, bl = best
+            params = {"torsional_frequency": {"estimated": ft, "unit": "Hz"},
+                      "motor_inertia": {"estimated": 0.3 * J, "unit": "kg*m^2"}}
+            if kind == "backlash":
+                params["backlash"] = {"estimated": bl, "unit": "rad"}
+            results.append({"kind": kind, "element": el, "share": max(share, 0.0), "value": (ft, bl),
+                            "apply": (lambda doc, el=el, J=J, ft=ft, bl=bl: _drive_doc(doc, el, J, ft, bl)),
+                            "parameters": params, "fundamental_hz": ft if kind == "compliance" else None,
+                            "detail": f"{el} {kind} f_t {ft:.3g} Hz, backlash {math.degrees(bl):.3g} deg"})
+    results.sort(key=lambda r: -r["share"])
+    d.other_log.append({"screened": [{"kind": r["kind"], "element": r["element"], "share": r["share"],
+                                      "detail": r["detail"]} for r in results]})
+    for r in results[:5]:
+        log.info("  screened %-10s %-14s explains %5.1f %% (%s)", r["kind"], r["element"], 100 * r["share"], r["detail"])
+    if not results or results[0]["share"] < MIN_SHARE:
+        return []
+    b = results[0]
+    if "line" in b:
+        budget[0] = max(budget[0], 5)
+        _line_search(b, sims, energies, doc0)
+        if b["share"] < MIN_SHARE:
+            return []
+    second = results[1]["share"] if len(results) > 1 else 0.0
+    conf = float(np.clip(b["share"], 0, 1) * (1.0 - second / b["share"] if b["share"] > 0 else 0.0))
+    conf = max(conf, 0.1 * b["share"])
+    same = [r for r in results if r is not b and r["share"] >= 0.85 * b["share"]]
+    eff = {
+        "element": b["element"], "kind": b["kind"],
+        "candidates": [{"element": r["element"], "kind": r["kind"], "explained_share": r["share"]}
+                       for r in [b] + same],
+        "fundamental_hz": b.get("fundamental_hz"),
+        "harmonics": [],
+        "explained_share": b["share"],
+        "confidence": conf,
+        "confidence_basis": (f"explains {100 * b['share']:.0f} % of the residual left after the periodic effects; "
+                             f"next candidate {100 * second:.0f} %"),
+        "parameters": b["parameters"],
+        "apply_doc": b["apply"],
+    }
+    return [eff]
+
+
+def _line_search(b, sims, energies, doc0, iterations=5):
+    """Refine the value of a (nearly) linear candidate: a parabola through the residual
+    energy at the evaluated values, minimised, simulated; the best value seen is kept."""
+    L = b["line"]
+    pts = list(L["points"])
+    v = b["value"]
+    for _ in range(iterations):
+        sb = sims(L["edit"](copy.deepcopy(doc0), v), f"refine {b['element']} = {v:.4g}")
+        if sb is None:
+            break
+        rd, dd, rr = energies(sb)
+        pts.append((v, rr - 2 * rd + dd))
+        v_new = _next_point(pts, L["lo"], L["hi"])
+        if v_new is None or min(abs(v_new - p[0]) for p in pts) < 0.01 * max(abs(v_new), 1e-6):
+            break
+        v = v_new
+    log.info("  line search %s: %s", b["element"], ", ".join(f"{x:.4g}: {y:.4g}" for x, y in pts))
+    best_v, best_J = min(pts, key=lambda p: p[1])
+    b["value"] = best_v
+    b["share"] = max(0.0, 1.0 - best_J / L["rr"]) if L["rr"] > 0 else 0.0
+    edit = L["edit"]
+    b["apply"] = lambda doc, edit=edit, v=best_v: edit(doc, v)
+    if b["kind"] == "parameter":
+        b["parameters"] = {k: {"nominal": x, "estimated": x * best_v, "unit": u} for k, (x, u) in L["values"].items()}
+        b["detail"] = f"{b['element']} x {best_v:.3g}"
+    else:
+        b["parameters"] = {"filter": {"nominal": L["tau0"], "estimated": best_v, "unit": "s"}}
+        b["detail"] = f"{b['element']} filter {1e3 * best_v:.3g} ms"
+    log.info("  refined %s: %s, explains %.1f %%", b["kind"], b["detail"], 100 * b["share"])
+
+
+def _next_point(pts, lo, hi):
+    """Next value to try: the minimum of a parabola through the best point and its
+    neighbours when it is convex and inside their bracket, else the golden-section
+    point of the larger side of the bracket (or a step beyond an end point)."""
+    P = sorted(pts)
+    xs = np.array([p[0] for p in P])
+    ys = np.array([p[1] for p in P])
+    i = int(np.argmin(ys))
+    if i == 0 or i == len(P) - 1:
+        j = 1 if i == 0 else len(P) - 2
+        step = xs[i] - xs[j]
+        return float(np.clip(xs[i] + step, lo, hi)) if lo < xs[i] + step < hi else None
+    x0, x1, x2 = xs[i - 1:i + 2]
+    y0, y1, y2 = ys[i - 1:i + 2]
+    den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
+    if den != 0:
+        v = x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
+        if x0 < v < x2 and abs(v - x1) > 1e-3 * (x2 - x0):
+            return float(v)
+    g = 0.381966
+    return float(x1 + g * (x2 - x1)) if x2 - x1 > x1 - x0 else float(x1 - g * (x1 - x0))
