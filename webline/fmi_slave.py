@@ -218,7 +218,7 @@ class ElementSlave(Fmi2Slave):
         attr = v.attr
 
         def get():
-            if refresh:
+            if refresh or self.model is None:
                 self._refresh_if_dirty()
             return getattr(self, attr)
 
@@ -350,7 +350,7 @@ class ElementSlave(Fmi2Slave):
         out = []
         for vr in vrs:
             attr, feed, _ = table[vr]
-            if feed and self.dirty:
+            if self.dirty and (feed or self.model is None):
                 self._refresh_if_dirty()
             out.append(float(getattr(self, attr)))
         return out
