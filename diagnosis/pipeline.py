@@ -228,14 +228,22 @@ class Diagnosis:
     def _angle(self, c, k):
         """Angle of candidate ``k`` in run ``c``: from the data if it has one, else the model's."""
         run = c.run
+        from diagnosis import orders
         for name in (k.element, k.component):
             if f"{name}.angle" in run.columns:
-                return np.unwrap(run.columns[f"{name}.angle"]), "data angle"
+                return orders.angle_from_encoder(run.columns[f"{name}.angle"]), "data angle"
         for name in (k.element, k.component):
             if f"{name}.pulse" in run.columns:
-                th = angle_from_pulse(run.t, run.columns[f"{name}.pulse"], c.nominal.columns.get(k.theta))
-                if th is not None:
-                    return th, "data pulse"
+                try:
+                    th = orders.angle_from_pulses(run.t, run.columns[f"{name}.pulse"])
+                except ValueError as exc:
+                    self.notes.append(f"run {run.name}: {name}.pulse not used ({exc})")
+                    continue
+                # the pulse fixes the angle up to a constant: anchor it to the model's at the start
+                th_model = c.nominal.columns.get(k.theta)
+                if th_model is not None:
+                    th = th - th[0] + th_model[0]
+                return th, "data pulse"
         th = c.nominal.columns.get(k.theta)
         if th is None:
             return np.zeros_like(c.t), "none"
@@ -626,26 +634,6 @@ class Diagnosis:
 
 
 # ================================================================== helpers ====
-def angle_from_pulse(t, pulse, theta_model=None):
-    """Angle from a once-per-revolution pulse: rising edges at theta = 2 pi k,
-    linear in between (extrapolated at the ends with the nearest revolution's rate)."""
-    p = np.asarray(pulse, float)
-    thr = 0.5 * (np.min(p) + np.max(p))
-    hi = p > thr
-    edges = np.flatnonzero(~hi[:-1] & hi[1:]) + 1
-    if len(edges) < 3:
-        return None
-    # sub-sample edge time by linear interpolation
-    te = t[edges - 1] + (thr - p[edges - 1]) / (p[edges] - p[edges - 1]) * (t[edges] - t[edges - 1])
-    k = np.arange(len(te)) * 2 * math.pi
-    th = np.interp(t, te, k)
-    r0 = (k[1] - k[0]) / (te[1] - te[0])
-    r1 = (k[-1] - k[-2]) / (te[-1] - te[-2])
-    th = np.where(t < te[0], k[0] + r0 * (t - te[0]), th)
-    th = np.where(t > te[-1], k[-1] + r1 * (t - te[-1]), th)
-    return th
-
-
 def _rms(x):
     x = np.asarray(x, float)
     return float(np.sqrt(np.mean(x ** 2))) if x.size else 0.0

@@ -58,6 +58,7 @@ def build(d):
         rep["steps"].append(row)
         prev = row
     rep["remaining_peaks"] = _remaining(d)
+    rep["across_runs"] = _across_runs(d, rep)
     rep["verdict"] = _verdict(rep)
     if d.out:
         out = Path(d.out)
@@ -233,6 +234,38 @@ def _remaining(d):
                     others = [min((abs(q["frequency_hz"] - p["frequency_hz"]) for q in out[o].get(s, [])),
                                   default=np.inf) for o in runs if o != rname]
                     p["same_frequency_in_other_runs"] = bool(all(x < 0.02 * p["frequency_hz"] + 0.05 for x in others))
+    return out
+
+
+def _across_runs(d, rep):
+    """Peaks of the nominal residual followed across runs (paper Figs 9-10, {33}).
+
+    A tagged peak moves with its element's speed and radius. An untagged peak
+    is checked for a rotating source of unknown radius: R = v / (2 pi f) at the
+    run's line speed v ({33}), and the elements of about that radius listed;
+    a peak at the same frequency in every run whatever the speed and radii is
+    not a rotating element (a resonance, a drive effect)."""
+    runs = [c for c in d.ctx]
+    out = []
+    for c in runs:
+        v = float(np.mean(np.abs(c.speed[c.mask]))) if c.mask.any() else float(np.mean(np.abs(c.speed)))
+        w = rep["where"][c.name]
+        for s, sv in w["sensors"].items():
+            for p in sv["peaks"][:10]:
+                if p["status"] != "untagged":
+                    continue
+                f = p["frequency_hz"]
+                R = v / (2 * math.pi * f) if f > 0 else None
+                near = [k.element for k in d.cands if R and k.radius > 0 and abs(k.radius - R) / R < 0.05]
+                others = []
+                for o in runs:
+                    if o is c:
+                        continue
+                    fo = [q["frequency_hz"] for q in rep["where"][o.name]["sensors"].get(s, {}).get("peaks", [])]
+                    others.append(any(abs(x - f) < max(0.02 * f, 0.05) for x in fo))
+                out.append({"run": c.name, "sensor": s, "frequency_hz": f, "amplitude": p["amplitude"],
+                            "line_speed_m_s": v, "radius_if_rotating_m": R, "elements_of_that_radius": near,
+                            "same_frequency_in_other_runs": (all(others) if others else None)})
     return out
 
 
