@@ -814,7 +814,7 @@ def markdown(summary, results=None, meta=None):
                  f"{', '.join(f['id'] for f in s['diagnose_failures'])} | 0 | - |")
     if results:
         L += ["", "| case | category | hidden (element: kind) | reported (element: kind [candidates]) | "
-              "f err | NRMSE ratio in / held out | s |", "|---|---|---|---|---|---|---|"]
+              "f err | NRMSE ratio in / held out | wall / CPU s |", "|---|---|---|---|---|---|---|"]
         for res in results:
             tr, sc, gp = res["truth"], res["score"], res.get("gap") or {}
             hid = "; ".join(f"{t['element']}: {t['kind']}" for t in tr["effects"]) or "none"
@@ -830,7 +830,7 @@ def markdown(summary, results=None, meta=None):
             go = (gp.get("held_out") or {}).get("ratio")
             L.append(f"| {tr['id']} | {tr['category']} | {hid} | {got} | "
                      f"{', '.join(f'{100 * x:.2g} %' for x in fe) or '-'} | {_num(gi, '{:.2f}')} / "
-                     f"{_num(go, '{:.2f}')} | {res.get('wall_s', 0):.0f} |")
+                     f"{_num(go, '{:.2f}')} | {res.get('wall_s', 0):.0f} / {_num(res.get('cpu_s'), '{:.0f}')} |")
     return "\n".join(L) + "\n"
 
 
