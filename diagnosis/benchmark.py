@@ -754,6 +754,11 @@ def markdown(summary, results=None, meta=None):
                  f"{s['cases']} cases, seed {meta.get('seed')}, {meta.get('mode', 'full')} mode, "
                  f"{meta.get('jobs', 1)} parallel jobs, total wall {meta.get('wall_s', 0) / 60:.1f} min on "
                  f"{meta.get('cpus', '?')} CPUs.")
+        code = meta.get("code") or {}
+        if code.get("commit"):
+            L.append(f"Code: commit {code['commit']}" + (f" plus uncommitted changes in "
+                                                         f"{', '.join(code['uncommitted'])}"
+                                                         if code.get("uncommitted") else "") + ".")
         L.append("")
         if line:
             L.append(f"Line: {', '.join(line.get('elements', []))} (derived from {line.get('derived_from')}; "

@@ -45,10 +45,10 @@ def parser():
 
 
 def _worker(args):
-    case, root, line_doc, fmu_paths, timeout = args
+    case, root, line_doc, fmu_paths, timeout, extra = args
     from diagnosis import benchmark as B
     t0 = time.perf_counter()
-    res = B.evaluate_case(case, root, line_doc, fmu_paths, timeout=timeout)
+    res = B.evaluate_case(case, root, line_doc, fmu_paths, timeout=timeout, extra=extra)
     res["case_wall_s"] = time.perf_counter() - t0
     return res
 
@@ -67,7 +67,9 @@ def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=
         cases = [c for c in cases if c.id in only]
     t0 = time.perf_counter()
     log(f"diagnose-bench: {len(cases)} cases ({'quick' if quick else 'full'}), seed {seed}, {jobs} jobs, in {out}")
-    tasks = [(c, out, line_doc, fmu_paths, timeout) for c in cases]
+    # cases run in parallel: each diagnosis then simulates serially (no oversubscription)
+    extra = ["--jobs", "1"] if jobs > 1 and _diagnose_has_option("--jobs") else []
+    tasks = [(c, out, line_doc, fmu_paths, timeout, extra) for c in cases]
     results = []
     if jobs <= 1:
         it = map(_worker, tasks)
@@ -102,8 +104,29 @@ def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=
             "line": {"derived_from": str(B.EWL.relative_to(B.REPO)), "elements": list(B.KEEP),
                      "step": B.STEP, "algorithm": B.ALGORITHM, "sample_rate_hz": B.FS},
             "load_average_end": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-            "work_folder": str(out)}
+            "diagnose_extra_args": extra, "code": _code_version(B.REPO), "work_folder": str(out)}
     return summary, results, meta
+
+
+def _diagnose_has_option(opt):
+    try:
+        from diagnosis import diagnose_cmd
+        return any(opt in a.option_strings for a in diagnose_cmd.parser()._actions)
+    except Exception:
+        return False
+
+
+def _code_version(repo):
+    """Commit of the code that ran, and the files of diagnosis/ that differed from it."""
+    import subprocess
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=repo, capture_output=True,
+                              text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--", "diagnosis", "orchestrator", "webline",
+                                "fmus"], cwd=repo, capture_output=True, text=True, timeout=10).stdout.split("\n")
+        return {"commit": head, "uncommitted": [ln[3:] for ln in dirty if ln.strip()]}
+    except (OSError, subprocess.SubprocessError):
+        return {"commit": None, "uncommitted": []}
 
 
 def rescore(out, log=None):
