@@ -7,6 +7,7 @@ Exit codes: 0 done (with or without an effect found), 1 a simulation failed,
 """
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -27,6 +28,8 @@ def parser():
     ap.add_argument("--no-polish", action="store_true", help="skip the Gauss-Newton polish simulation")
     ap.add_argument("--no-other", action="store_true",
                     help="do not screen backlash, compliance, sensor and parameter effects")
+    ap.add_argument("--jobs", type=int, default=None,
+                    help="simulations run in parallel worker processes (default: 2 if the machine has 2+ cores)")
     ap.add_argument("--quiet", action="store_true", help="only warnings")
     return ap
 
@@ -43,7 +46,8 @@ def main(argv=None):
         return 2
     opt = Options(harmonics=args.harmonics, max_effects=args.max_effects, significance=args.significance,
                   polish=not args.no_polish, other_effects=not args.no_other,
-                  progress=not args.quiet and sys.stderr.isatty())
+                  progress=not args.quiet and sys.stderr.isatty(),
+                  jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1))
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:

@@ -41,7 +41,7 @@ class Sim:
 
 
 class LineModel:
-    def __init__(self, layout_path, fmu_paths=None, progress=False):
+    def __init__(self, layout_path, fmu_paths=None, progress=False, jobs=1):
         from diagnosis import layout_edit
         self.path = Path(layout_path)
         if not self.path.is_file():
@@ -52,6 +52,8 @@ class LineModel:
         self.n_sims = 0
         self.sim_wall = 0.0
         self._tmp = None
+        self.jobs = max(1, int(jobs))
+        self._pool = None
 
     # ------------------------------------------------------------------ FMUs ----
     @property
@@ -105,6 +107,9 @@ class LineModel:
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
+        if getattr(self, "_pool", None) is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
 
     def copy_doc(self):
         return copy.deepcopy(self.doc)
@@ -127,6 +132,51 @@ class LineModel:
         t, cols = _columns(result)
         out = {k: np.interp(run.t, t, v) for k, v in cols.items()}  # run time is model time
         return Sim(system, out, wall)
+
+    def simulate_many(self, jobs):
+        """Simulate ``jobs`` = [(run, doc, label)]; returns [Sim] in order (or the
+        exception raised by a job in its place, for the caller to handle).
+
+        With ``self.jobs`` > 1 the simulations run in worker processes (spawned:
+        every worker loads its own FMU instances; pythonfmu's module names are
+        process-global), the pool kept for the whole diagnosis."""
+        jobs = list(jobs)
+        if self.jobs <= 1 or len(jobs) < 2:
+            out = []
+            for run, doc, label in jobs:
+                try:
+                    out.append(self.simulate(run, doc, label=label))
+                except (SimulationFailed, ValueError) as exc:
+                    out.append(exc)
+            return out
+        if self._pool is None:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+            self._pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"))
+        paths = {k: str(v) for k, v in self.fmu_paths.items()}
+        futures = [self._pool.submit(_worker_simulate, str(self.path), paths, run, doc, label)
+                   for run, doc, label in jobs]
+        out = []
+        for (run, doc, label), fut in zip(jobs, futures):
+            try:
+                sim = fut.result()
+            except (SimulationFailed, ValueError) as exc:
+                out.append(exc)
+                continue
+            self.n_sims += 1
+            self.sim_wall += sim.wall
+            log.info("  simulated %s%s: %.3g s of line in %.1f s (worker)", run.name,
+                     f" ({label})" if label else "", run.t[-1], sim.wall)
+            out.append(sim)
+        return out
+
+
+def _worker_simulate(layout, fmu_paths, run, doc, label):
+    model = LineModel(layout, {k: Path(v) for k, v in fmu_paths.items()})
+    try:
+        return model.simulate(run, doc, label=label)
+    finally:
+        model.cleanup()
 
 
 def _columns(result):

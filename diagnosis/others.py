@@ -212,15 +212,11 @@ def screen(d):
             return None
         budget[0] -= 1
         out = {}
-        for c in fit:
-            try:
-                out[c.name] = d.model.simulate(c.run, doc=doc, label=label)
-            except SimulationFailed as exc:
-                log.info("  %s: %s", label, exc)
+        for c, sim in zip(fit, d.model.simulate_many([(c.run, doc, label) for c in fit])):
+            if isinstance(sim, Exception):  # a failed run or a layout the test value makes invalid
+                log.info("  %s: not screened (%s)", label, (str(sim).splitlines() or [""])[0])
                 return None
-            except Exception as exc:  # a layout the test value makes invalid
-                log.info("  %s: not screened (%s)", label, str(exc).splitlines()[0])
-                return None
+            out[c.name] = sim
         return out
 
     def energies(sim_by_run, beta=None):

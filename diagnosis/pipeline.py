@@ -61,6 +61,7 @@ class Options:
     other_effects: bool = True       # screen non-periodic effects when a significant residual remains
     fmu_paths: dict = None
     progress: bool = False
+    jobs: int = 1                    # simulations in parallel (worker processes)
 
 
 class DiagnoseError(ValueError):
@@ -144,7 +145,7 @@ class Diagnosis:
         from orchestrator.layout import LayoutError
         if not self.layout_path.exists():
             raise DiagnoseError(f"{self.layout_path}: layout not found")
-        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress)
+        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress, jobs=self.opt.jobs)
         self.ctx = []
         names = set()
         for paths, fit in ((self.run_paths, True), (self.holdout_paths, False)):
@@ -195,11 +196,11 @@ class Diagnosis:
 
     # ------------------------------------------------------------- 2 nominal ----
     def simulate_nominal(self):
-        for c in self.ctx:
-            try:
-                c.nominal = self.model.simulate(c.run, label="nominal")
-            except SimulationFailed as exc:
-                raise DiagnoseError(str(exc)) from None
+        sims = self.model.simulate_many([(c.run, None, "nominal") for c in self.ctx])
+        for c, sim in zip(self.ctx, sims):
+            if isinstance(sim, Exception):
+                raise SimulationFailed(f"nominal model: {sim}")
+            c.nominal = sim
             self._prepare(c)
 
     def _prepare(self, c):
@@ -494,9 +495,19 @@ class Diagnosis:
         self.final_effects = []
         for idx, eff in enumerate(self.effects):
             ranked = []
+            H, a0 = self.opt.harmonics, self.opt.test_amplitude
+            jobs, keys = [], []
             for d in eff["group"]:
                 k = d["cand"]
-                G, M, W = self._gains_and_measured(k, eff, d, fit)
+                doc = layout_edit.with_fourier(self.model.copy_doc(), k, np.full(H, a0), np.zeros(H))
+                for c in fit:
+                    if self.orders_for(c, k.key):
+                        jobs.append((c.run, doc, f"sensitivity {k.element}"))
+                        keys.append((k.key, c.name))
+            sens = dict(zip(keys, self.model.simulate_many(jobs)))
+            for d in eff["group"]:
+                k = d["cand"]
+                G, M, W = self._gains_and_measured(k, eff, d, fit, sens)
                 if G is None:
                     continue
                 X, misfit = est.solve_fourier(M, G, W)
@@ -516,7 +527,7 @@ class Diagnosis:
             log.info("  %s: C = %s um, misfit %.3f", b["cand"].element,
                      ", ".join(f"{1e6 * abs(x):.1f}" for x in b["X"]), b["misfit"])
 
-    def _gains_and_measured(self, k, eff, d, fit):
+    def _gains_and_measured(self, k, eff, d, fit, sens):
         """Complex gains G[(run, sensor), order] from a sensitivity simulation and
         the measured harmonics M (same shape) of the residual the effect was found in."""
         H = self.opt.harmonics
@@ -527,11 +538,9 @@ class Diagnosis:
             orders = self.orders_for(c, k.key)
             if not orders:
                 continue
-            doc = layout_edit.with_fourier(self.model.copy_doc(), k, np.full(H, a0), np.zeros(H))
-            try:
-                sim = self.model.simulate(c.run, doc=doc, label=f"sensitivity {k.element}")
-            except SimulationFailed as exc:
-                log.warning("  %s", exc)
+            sim = sens.get((k.key, c.name))
+            if sim is None or isinstance(sim, Exception):
+                log.warning("  sensitivity of %s not available: %s", k.element, sim)
                 return None, None, None
             th_sim = sim.columns.get(k.theta, c.theta[k.key])
             th_meas = self._theta_refined(c, k)
@@ -548,7 +557,6 @@ class Diagnosis:
                 Gs.append(g)
                 Ms.append(m)
                 Ws.append(1.0 / max(float(np.median(c.floors[s].S)), 1e-300))
-            d.setdefault("sens", {})[c.name] = sim
         if not Gs:
             return None, None, None
         return np.array(Gs), np.array(Ms), np.array(Ws)
@@ -576,14 +584,11 @@ class Diagnosis:
                 X = self._polish(doc, b, X)
                 b["X"] = X
             doc = layout_edit.with_fourier(doc, b["cand"], np.abs(X), np.angle(X), add=True)
-            sims = {}
-            for c in self.ctx:
-                sims[c.name] = self.model.simulate(c.run, doc=doc, label=f"refined +{b['cand'].element}")
+            sims = self._simulate_all(doc, f"refined +{b['cand'].element}")
             self.steps.append({"added": b["cand"].element, "kind": b["cand"].kind, "sims": sims})
         for o in getattr(self, "other", []) or []:
             doc = o["apply_doc"](doc)
-            sims = {c.name: self.model.simulate(c.run, doc=doc, label=f"refined +{o['element']} {o['kind']}")
-                    for c in self.ctx}
+            sims = self._simulate_all(doc, f"refined +{o['element']} {o['kind']}")
             self.steps.append({"added": o["element"], "kind": o["kind"], "sims": sims})
         self.refined_doc = doc
         if self.out:
@@ -597,6 +602,14 @@ class Diagnosis:
                 st["metrics"][c.name] = {s: mx.gap_metrics(c.t, c.meas[s], sim.columns[s], c.fs, c.mask)
                                          for s in c.sensors}
 
+    def _simulate_all(self, doc, label, ctxs=None):
+        ctxs = self.ctx if ctxs is None else ctxs
+        sims = self.model.simulate_many([(c.run, doc, label) for c in ctxs])
+        for c, sim in zip(ctxs, sims):
+            if isinstance(sim, Exception):
+                raise SimulationFailed(f"run {c.name} ({label}): {sim}")
+        return {c.name: sim for c, sim in zip(ctxs, sims)}
+
     def _polish(self, doc, b, X):
         """One Gauss-Newton step: simulate with X, fit the remaining harmonics, correct X."""
         k = b["cand"]
@@ -604,11 +617,15 @@ class Diagnosis:
         trial = layout_edit.with_fourier(doc, k, np.abs(X), np.angle(X), add=True)
         H = self.opt.harmonics
         Ms, before = [], 0.0
+        fit = [c for c in fit if self.orders_for(c, k.key)]
+        try:
+            sims = self._simulate_all(trial, f"polish {k.element}", fit)
+        except SimulationFailed as exc:
+            log.warning("  polish skipped: %s", exc)
+            return X
         for c in fit:
             orders = self.orders_for(c, k.key)
-            if not orders:
-                continue
-            sim = self.model.simulate(c.run, doc=trial, label=f"polish {k.element}")
+            sim = sims[c.name]
             th = self._theta_refined(c, k)
             for s in c.sensors:
                 r = est.split_slow_periodic(c.meas[s] - sim.columns[s], c.fs, c.fc)[1]
