@@ -177,8 +177,8 @@ def test_ewl_in_libcosim_matches_our_master(ewl_short):
     assert np.allclose(ours.time[1:], t)
     tensions = [c for c in ours.columns if c.endswith(".T")]
     assert len(tensions) > 10
-    for col in tensions:
-        assert _rel_err(d[col], ours[col][1:]) < 1e-3, col
+    for col in tensions:  # measured 2.4e-6 (libcosim reads feed-through outputs before new inputs)
+        assert _rel_err(d[col], ours[col][1:]) < 1e-4, col
 
 
 def test_export_ssp_command(tmp_path, capsys):
