@@ -740,6 +740,10 @@ def _pct(x):
     return "-" if x is None else f"{100 * x:.0f} %"
 
 
+def _pct2(x):
+    return "-" if x is None else f"{100 * x:.2g} %"
+
+
 def _num(x, fmt="{:.3g}"):
     return "-" if x is None else fmt.format(x)
 
@@ -794,11 +798,12 @@ def markdown(summary, results=None, meta=None):
     L.append(f"| invented effects on noise-only cases | {no['false_effects']} in {no['cases']} cases | 0 | "
              f"{s['verdict']['no_invented_effect']} |")
     fe = s["fundamental_rel_error"]
-    L.append(f"| fundamental frequency error (matched periodic) | median {_pct(fe['median']) if fe['n'] else '-'}"
-             f"{', max ' + format(100 * fe['max'], '.2g') + ' %' if fe['n'] else ''} (n={fe['n']}) | - | - |")
+    L.append(f"| fundamental frequency error (matched periodic) | median {_pct2(fe['median'])}, max "
+             f"{_pct2(fe['max'])} (n={fe['n']}) | - | - |")
     ae = s["dominant_amplitude_rel_error"]
-    L.append(f"| dominant harmonic amplitude error (exact matches) | median {_pct(ae['median'])} (n={ae['n']}) "
-             f"| - | - |")
+    pe = s["dominant_phase_error_rad"]
+    L.append(f"| dominant harmonic amplitude / phase error (exact matches) | median {_pct2(ae['median'])}, max "
+             f"{_pct2(ae['max'])} / median {_num(pe['median'], '{:.2g}')} rad (n={ae['n']}) | - | - |")
     g = s["gap"]
     L.append(f"| in-sample NRMSE refined/nominal, cases with an effect | median {_num(g['in_sample_ratio']['median'])}"
              f" (n={g['in_sample_ratio']['n']}) | - | - |")
