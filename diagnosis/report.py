@@ -446,13 +446,13 @@ def html_report(d, rep):
             ax.set_xlim(0, fmax)
             for pk in rep["where"][c.name]["sensors"][s]["peaks"][:12]:
                 lab = (f"{pk['element']}×{pk['order']}" if pk["status"] == "tagged"
-                       else ("?" if pk["status"] == "untagged" else "/".join(x["element"] for x in pk["candidates"][:3])))
+                       else ("?" if pk["status"] == "untagged" else "/".join(x["element"] for x in pk["candidates"][:2])))
                 ax.annotate(lab, (pk["frequency_hz"], pk["amplitude"]), fontsize=7, rotation=60,
                             xytext=(0, 6), textcoords="offset points")
             ax.set_xlabel("f (Hz)")
             ax.set_ylabel("amplitude (N)")
             ax.legend(fontsize=8)
-            ax.set_title(f"run {c.name}: spectra of {s} (fit window; peaks tagged to element×order)")
+            ax.set_title(f"run {c.name}: spectra of {s} (fit window; peaks tagged to element×order)", pad=40)
             parts.append(f"<img src='{_png(fig)}'>")
     parts.append(f"<h2>Run time</h2><p>{e(', '.join(f'{k} {v:.1f} s' for k, v in rep['timings_s'].items()))}; "
                  f"{rep['simulations']['count']} simulations.</p>")
