@@ -145,6 +145,11 @@ class Diagnosis:
         from orchestrator.layout import LayoutError
         if not self.layout_path.exists():
             raise DiagnoseError(f"{self.layout_path}: layout not found")
+        from orchestrator.layout import load_system
+        try:
+            load_system(self.layout_path)
+        except LayoutError as exc:
+            raise DiagnoseError(f"invalid layout:\n{exc}") from None
         self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress, jobs=self.opt.jobs)
         self.ctx = []
         names = set()

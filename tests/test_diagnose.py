@@ -127,7 +127,7 @@ def test_noise_only_reports_no_effect(line, tmp_path):
     assert rep["gap"]["lc.T"]["nominal"] is not None
 
 
-@pytest.mark.parametrize("case", ["time_backwards", "no_sensor", "no_data_key", "missing_file", "bad_unit",
+@pytest.mark.parametrize("case", ["time_backwards", "no_sensor", "no_data_key", "missing_file", "bad_unit", "bad_layout",
                                   "bad_condition"])
 def test_bad_input_exits_2(line, tmp_path, case, capsys):
     d, _ = line
@@ -146,8 +146,11 @@ def test_bad_input_exits_2(line, tmp_path, case, capsys):
         header = "time [s],lc.T [flux_capacitors]"
     elif case == "bad_condition":
         spec["experiment"]["line_speed"] = "fast"
+    elif case == "bad_layout":
+        (tmp_path / "line.yaml").write_text(LAYOUT.replace("radius: 1.5 in", "radius: -1.5 in"))
+    layout = tmp_path / "line.yaml" if case == "bad_layout" else d / "line.yaml"
     np.savetxt(tmp_path / "run.csv", np.column_stack(cols), delimiter=",", header=header, comments="")
     (tmp_path / "run.yaml").write_text(yaml.safe_dump(spec))
-    assert diagnose([d / "line.yaml", tmp_path / "run.yaml", "--out", tmp_path / "out"]) == 2
+    assert diagnose([layout, tmp_path / "run.yaml", "--out", tmp_path / "out"]) == 2
     err = capsys.readouterr().err
     assert "webline diagnose:" in err and "Traceback" not in err
