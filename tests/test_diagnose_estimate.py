@@ -1,0 +1,84 @@
+"""Numerical core of the diagnosis (diagnosis.estimate), on signals with known answers."""
+import math
+
+import numpy as np
+import pytest
+
+from diagnosis import estimate as est
+
+FS = 500.0
+
+
+def _angle(t, f0=1.0, drift=0.002):
+    """Angle of a shaft whose speed drifts (a shrinking roll): omega = 2 pi f0 (1 + drift t)."""
+    return 2 * math.pi * f0 * (t + 0.5 * drift * t * t)
+
+
+def test_harmonic_fit_recovers_complex_amplitudes_at_varying_speed():
+    t = np.arange(0, 30, 1 / FS)
+    th = _angle(t)
+    Y = np.array([0.5, 0.3j, 0.2 - 0.1j])
+    y = est.harmonic_signal(th, Y, [1, 2, 3]) + np.random.default_rng(0).normal(0, 0.2, len(t))
+    Yh = est.fit_harmonics(y, th, [1, 2, 3])
+    assert np.max(np.abs(Yh - Y)) < 0.02
+
+
+def test_significance_separates_lines_from_noise():
+    rng = np.random.default_rng(1)
+    t = np.arange(0, 20, 1 / FS)
+    th = _angle(t, 2.0)
+    orders = list(range(1, 7))
+    freqs = 2.0 * np.array(orders)
+    noise = rng.normal(0, 0.5, len(t))
+    z0 = est.harmonic_z(est.fit_harmonics(noise, th, orders), freqs, est.NoiseFloor(noise, FS), 20.0)
+    assert est.gamma_log10_sf(z0.sum(), len(orders)) > -4          # noise: not significant
+    y = noise + 0.1 * np.sin(th + 0.4)                                 # a line 5x below the noise rms
+    z1 = est.harmonic_z(est.fit_harmonics(y, th, orders), freqs, est.NoiseFloor(y, FS), 20.0)
+    assert est.gamma_log10_sf(z1.sum(), len(orders)) < -20
+    assert est.gamma_log10_sf(1e5, 6) < -1000                          # no underflow to -inf
+    assert math.isfinite(est.gamma_log10_sf(1e5, 6))
+
+
+def test_refine_angle_finds_speed_scale():
+    t = np.arange(0, 40, 1 / FS)
+    th = _angle(t, 1.5)
+    y = est.harmonic_signal(1.012 * th, [0.3, 0.1j], [1, 2]) + np.random.default_rng(2).normal(0, 0.1, len(t))
+    kappa, _ = est.refine_angle(y, th, [1, 2], span=0.03)
+    assert abs(kappa - 0.012) < 1e-3
+
+
+def test_solve_fourier_from_gains_and_pattern_misfit():
+    rng = np.random.default_rng(3)
+    X = np.array([60e-6 * np.exp(0.3j), 20e-6 * np.exp(1.0j)])
+    G = rng.normal(size=(3, 2)) * 3e3 + 1j * rng.normal(size=(3, 2)) * 3e3   # 3 sensors
+    Xh, misfit = est.solve_fourier(G * X, G)
+    assert np.allclose(Xh, X) and misfit < 1e-12
+    G_other = rng.normal(size=(3, 2)) * 3e3 + 0j                              # another element's pattern
+    _, misfit_other = est.solve_fourier(G * X, G_other)
+    assert misfit_other > 0.05
+
+
+def test_complex_gain_of_a_linear_response():
+    t = np.arange(0, 10, 1 / FS)
+    th = 2 * math.pi * 3.0 * t
+    Xt = np.full(2, 50e-6, complex)
+    G = np.array([2000 * np.exp(-0.5j), 800 * np.exp(1.2j)])
+    delta = est.harmonic_signal(th, G * Xt, [1, 2])
+    assert np.allclose(est.complex_gain(delta, th, [1, 2], Xt), G)
+
+
+@pytest.mark.parametrize("fc", [0.3, 1.0])
+def test_slow_periodic_split(fc):
+    t = np.arange(0, 20, 1 / FS)
+    slow = 0.5 * np.tanh(t - 10)
+    per = 0.2 * np.sin(2 * math.pi * 5 * t)
+    s, p = est.split_slow_periodic(slow + per, FS, fc)
+    assert np.sqrt(np.mean((p - per) ** 2)) < 0.02 and np.allclose(s + p, slow + per)
+
+
+def test_steady_mask_excludes_ramps():
+    t = np.arange(0, 20, 1 / FS)
+    v = np.clip(t / 5.0, 0, 1) * 1.0            # ramp 0..5 s, then steady
+    m = est.steady_mask(v, FS)
+    assert not m[t < 4.5].any() and m[t > 6].all()
+    assert est.windows_of(m, t)[0][0] == pytest.approx(5.0, abs=0.6)
