@@ -3,6 +3,7 @@
 Exit codes: 0 ok, 1 run failure, 2 bad input (argparse uses 2 as well).
 """
 import importlib
+import os
 import sys
 
 # sub-command -> (module with main(argv) -> int, one-line help)
@@ -23,17 +24,31 @@ COMMANDS = {
 
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "--version":
+        from webline import __version__
+        print(f"webline {__version__}")
+        return 0
     if not argv or argv[0] in ("-h", "--help"):
         print("usage: webline COMMAND [--help] ...\n\ncommands:")
         for name, (_, text) in COMMANDS.items():
-            print(f"  {name:<12} {text}")
+            print(f"  {name:<15} {text}")
         return 0 if argv else 2
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         print(f"webline: unknown command {name!r}; try 'webline --help'", file=sys.stderr)
         return 2
-    module = importlib.import_module(COMMANDS[name][0])
-    return module.main(rest)
+    try:
+        module = importlib.import_module(COMMANDS[name][0])
+        return module.main(rest)
+    except KeyboardInterrupt:
+        print(f"webline {name}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # the last line of defence: no bare traceback for users
+        if os.environ.get("WEBLINE_DEBUG"):
+            raise
+        print(f"webline {name}: internal error: {type(exc).__name__}: {exc}\n"
+              f"  (set WEBLINE_DEBUG=1 for the traceback, and please report it)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
