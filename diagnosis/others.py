@@ -33,7 +33,7 @@ log = logging.getLogger("webline.diagnose")
 
 MIN_Z = 50.0          # remaining residual energy / expected noise energy needed to look further
 MIN_SHARE = 0.25      # share of the remaining residual a candidate must explain
-MAX_SCREEN = 12       # screening simulations per fit run
+MAX_SCREEN = 14       # screening simulations per fit run
 
 
 def _q(value, dim):
@@ -153,17 +153,19 @@ def sensor_candidates(d):
 
 
 def drive_candidates(d):
-    """Driven elements with an ideal drive: (element, load inertia, speed-loop name)."""
+    """Driven elements with an ideal drive: (element, total inertia J, (layout key, its value))."""
     base = _base(d)
     loops = base.get("drives", {}).get("speed_loops", {}) or {}
     out = []
     for c in d.system0.components:
         if c.model in cand_mod.DRIVEN_MODELS and c.element in loops and not (loops[c.element] or {}).get("drive"):
-            J = c.parameters.get("J", c.parameters.get("J_core", 0.0))
             if c.model in ("UnwindRoll", "RewindRoll"):
-                meta = d.system0.meta["elements"].get(c.element, {})
-                J = J + _roll_inertia(d, c)
-            out.append((c.element, max(J, 1e-6)))
+                own = ("core_inertia", c.parameters.get("J_core", 0.0))
+                J = own[1] + _roll_inertia(d, c)
+            else:
+                own = ("inertia", c.parameters.get("J", 0.0))
+                J = own[1]
+            out.append((c.element, max(J, 1e-6), own))
     return out
 
 
@@ -172,12 +174,25 @@ def _roll_inertia(d, c):
     return 0.5 * math.pi * p.get("rho", 0) * p.get("width", 0) * (p.get("R0", 0) ** 4 - p.get("R_core", 0) ** 4)
 
 
-def _drive_doc(doc, element, J, f_t, backlash, zeta=0.05):
-    """Motor inertia 30 % of the element's, the rest stays on the element; shaft
-    stiffness placing the torsional mode at ``f_t``; damping ratio ``zeta``."""
-    Jm = 0.3 * J
-    k = (2 * math.pi * f_t) ** 2 / (1.0 / Jm + 1.0 / J)
-    c = 2 * zeta * math.sqrt(k * Jm * J / (Jm + J))
+MOTOR_SHARE = 0.3  # share of the element's inertia that sits on the motor side of the shaft
+
+
+def _drive_doc(doc, spec, f_t, backlash, zeta=0.05):
+    """Non-ideal drive on ``spec`` = (element, J, (key, own inertia)): 30 % of the
+    inertia moved to the motor side (the total unchanged), a shaft placing the
+    two-mass torsional mode at ``f_t`` with damping ratio ``zeta``, a dead zone
+    ``backlash`` (rad)."""
+    element, J, (key, own) = spec
+    Jm = MOTOR_SHARE * J
+    if own - Jm <= 0.05 * own:  # a light core: keep it, the motor adds to the total
+        Jm = min(Jm, 0.5 * own) if own > 0 else Jm
+    Jr = Jm * (J - Jm) / J
+    k = (2 * math.pi * f_t) ** 2 * Jr
+    c = 2 * zeta * math.sqrt(k * Jr)
+    if own > Jm:
+        if key == "inertia":
+            doc = layout_edit.with_set(doc, f"path.{element}.mass", None)
+        doc = layout_edit.with_set(doc, f"path.{element}.{key}", f"{own - Jm:.6g} kg*m^2")
     return layout_edit.with_set(doc, f"drives.speed_loops.{element}.drive",
                                 {"motor_inertia": f"{Jm:.6g} kg*m^2", "stiffness": f"{k:.6g} N*m/rad",
                                  "damping": f"{c:.6g} N*m*s/rad", "backlash": f"{backlash:.6g} rad"})
@@ -238,10 +253,10 @@ def screen(d):
     if slow_first:
         order += [("parameter", p) for p in parameter_candidates(d)]
         order += [("sensor", s) for s in sensor_candidates(d)]
-    f_t = peaks[0] if peaks else 15.0
-    for el, J in drive_candidates(d):
-        order.append(("compliance", (el, J)))
-        order.append(("backlash", (el, J)))
+    f_t = next((p for p in peaks if 2.0 <= p <= 30.0), 10.0)
+    for spec in drive_candidates(d):
+        order.append(("compliance", spec))
+        order.append(("backlash", spec))
     if not slow_first:
         order += [("sensor", s) for s in sensor_candidates(d)]
         order += [("parameter", p) for p in parameter_candidates(d)]
@@ -282,28 +297,27 @@ def screen(d):
                             "parameters": {"filter": {"nominal": tau0, "estimated": tau, "unit": "s"}},
                             "detail": f"{name} filter {1e3 * tau:.3g} ms"})
         else:
-            el, J = spec
-            best = None
-            grid = [(f_t, 0.0)] if kind == "compliance" else [(30.0, math.radians(0.5)), (30.0, math.radians(2.0))]
-            for ft, bl in grid:
-                sb = sims(_drive_doc(copy.deepcopy(doc0), el, J, ft, bl), f"screen {el} {kind}")
-                if sb is None:
-                    continue
-                rd, dd, rr = energies(sb)
-                share = 1.0 - (rr - 2 * rd + dd) / rr if rr > 0 else 0.0
-                if best is None or share > best[0]:
-                    best = (share, ft, bl)
-            if best is None:
+            el = spec[0]
+            if kind == "compliance":
+                edit = (lambda doc, f, spec=spec: _drive_doc(doc, spec, f, 0.0))
+                v0, lo, hi, unit = f_t, 1.0, 40.0, "Hz"
+            else:
+                edit = (lambda doc, bl, spec=spec: _drive_doc(doc, spec, 50.0, bl))
+                v0, lo, hi, unit = math.radians(1.5), math.radians(0.1), math.radians(6.0), "rad"
+            sb = sims(edit(copy.deepcopy(doc0), v0), f"screen {el} {kind}")
+            if sb is None:
                 continue
-            share, ft, bl = best
-            params = {"torsional_frequency": {"estimated": ft, "unit": "Hz"},
-                      "motor_inertia": {"estimated": 0.3 * J, "unit": "kg*m^2"}}
-            if kind == "backlash":
-                params["backlash"] = {"estimated": bl, "unit": "rad"}
-            results.append({"kind": kind, "element": el, "share": max(share, 0.0), "value": (ft, bl),
-                            "apply": (lambda doc, el=el, J=J, ft=ft, bl=bl: _drive_doc(doc, el, J, ft, bl)),
-                            "parameters": params, "fundamental_hz": ft if kind == "compliance" else None,
-                            "detail": f"{el} {kind} f_t {ft:.3g} Hz, backlash {math.degrees(bl):.3g} deg"})
+            rd, dd, rr = energies(sb)
+            J1 = rr - 2 * rd + dd
+            share = 1.0 - J1 / rr if rr > 0 else 0.0
+            second = 0.8 * v0
+            results.append({"kind": kind, "element": el, "share": max(share, 0.0), "value": v0,
+                            "apply": (lambda doc, edit=edit, v=v0: edit(doc, v)),
+                            "line": {"edit": edit, "points": [(v0, J1)], "second": second,
+                                     "lo": lo, "hi": hi, "rr": rr, "unit": unit, "J": spec[1]},
+                            "parameters": {}, "fundamental_hz": v0 if kind == "compliance" else None,
+                            "detail": f"{el} {kind} " + (f"f_t {v0:.3g} Hz" if kind == "compliance"
+                                                         else f"backlash {math.degrees(v0):.3g} deg")})
     results.sort(key=lambda r: -r["share"])
     d.other_log.append({"screened": [{"kind": r["kind"], "element": r["element"], "share": r["share"],
                                       "detail": r["detail"]} for r in results]})
@@ -342,13 +356,16 @@ def _line_search(b, sims, energies, doc0, iterations=5):
     energy at the evaluated values, minimised, simulated; the best value seen is kept."""
     L = b["line"]
     pts = list(L["points"])
-    v = b["value"]
+    v = L.get("second", b["value"])
     for _ in range(iterations):
         sb = sims(L["edit"](copy.deepcopy(doc0), v), f"refine {b['element']} = {v:.4g}")
         if sb is None:
             break
         rd, dd, rr = energies(sb)
         pts.append((v, rr - 2 * rd + dd))
+        ys = [p[1] for p in pts]
+        if len(pts) >= 2 and max(ys) - min(ys) < 1e-3 * max(ys):
+            break  # the residual does not depend on this value: keep the screened one
         v_new = _next_point(pts, L["lo"], L["hi"])
         if v_new is None or min(abs(v_new - p[0]) for p in pts) < 0.01 * max(abs(v_new), 1e-6):
             break
@@ -359,7 +376,18 @@ def _line_search(b, sims, energies, doc0, iterations=5):
     b["share"] = max(0.0, 1.0 - best_J / L["rr"]) if L["rr"] > 0 else 0.0
     edit = L["edit"]
     b["apply"] = lambda doc, edit=edit, v=best_v: edit(doc, v)
-    if b["kind"] == "parameter":
+    if b["kind"] in ("compliance", "backlash"):
+        J = L["J"]
+        b["parameters"] = {"motor_inertia": {"estimated": MOTOR_SHARE * J, "unit": "kg*m^2"}}
+        if b["kind"] == "compliance":
+            b["fundamental_hz"] = best_v
+            b["parameters"]["torsional_frequency"] = {"estimated": best_v, "unit": "Hz"}
+            b["detail"] = f"{b['element']} compliance, torsional mode {best_v:.3g} Hz"
+        else:
+            b["parameters"]["torsional_frequency"] = {"estimated": 50.0, "unit": "Hz"}
+            b["parameters"]["backlash"] = {"estimated": best_v, "unit": "rad"}
+            b["detail"] = f"{b['element']} backlash {math.degrees(best_v):.3g} deg"
+    elif b["kind"] == "parameter":
         b["parameters"] = {k: {"nominal": x, "estimated": x * best_v, "unit": u} for k, (x, u) in L["values"].items()}
         b["detail"] = f"{b['element']} x {best_v:.3g}"
     else:
