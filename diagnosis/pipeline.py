@@ -525,12 +525,42 @@ class Diagnosis:
             if not ranked:
                 continue
             # best pattern fit first; ties (one sensor: every element fits exactly) go to
-            # the element whose own fundamental is present, then to the energy explained
-            ranked.sort(key=lambda r: (round(r["misfit"], 2), r["score"]["lowest_order"], -r["score"]["E"]))
+            # the element whose own fundamental is present, then to the smallest
+            # eccentricity that explains the data (elements turning at the same speed
+            # explain the same energy; the one that needs less is the likelier)
+            ranked.sort(key=lambda r: (round(r["misfit"], 2), r["score"]["lowest_order"],
+                                       float(np.linalg.norm(r["X"]))))
+            self._verify_ties(ranked, fit)
             self.final_effects.append({"ranked": ranked, "eff": eff})
             b = ranked[0]
             log.info("  %s: C = %s um, misfit %.3f", b["cand"].element,
                      ", ".join(f"{1e6 * abs(x):.1f}" for x in b["X"]), b["misfit"])
+
+    def _verify_ties(self, ranked, fit):
+        """Candidates whose patterns fit equally well (one load cell: all exactly) are
+        told apart by simulation: each with its estimated eccentricity, the one whose
+        whole record (transients included) is closest to the data goes first."""
+        tied = [r for r in ranked if r["misfit"] - ranked[0]["misfit"] < 0.02]
+        if len(tied) < 2:
+            return
+        jobs, keys = [], []
+        for r in tied:
+            doc = layout_edit.with_fourier(self.model.copy_doc(), r["cand"], np.abs(r["X"]), np.angle(r["X"]))
+            for c in fit:
+                jobs.append((c.run, doc, f"tie check {r['cand'].element}"))
+                keys.append((id(r), c))
+        for (rid, c), sim in zip(keys, self.model.simulate_many(jobs)):
+            r = next(x for x in tied if id(x) == rid)
+            if isinstance(sim, Exception):
+                r["verify"] = math.inf
+                continue
+            r["verify"] = r.get("verify", 0.0) + sum(
+                float(np.sum((c.meas[s] - sim.columns[s])[c.mask] ** 2)) for s in c.sensors)
+        tied.sort(key=lambda r: r.get("verify", math.inf))
+        rest = [r for r in ranked if all(r is not x for x in tied)]
+        ranked[:] = tied + rest
+        log.info("  tie between %s: residual energy with each %s", ", ".join(r["cand"].element for r in tied),
+                 ", ".join(f"{r.get('verify', math.inf):.4g}" for r in tied))
 
     def _gains_and_measured(self, k, eff, d, fit, sens):
         """Complex gains G[(run, sensor), order] from a sensitivity simulation and

@@ -142,6 +142,7 @@ def _cand_entry(d, r):
     return {"element": k.element, "component": k.component, "kind": k.kind,
             "explained_share": r["score"]["share"], "pattern_misfit": r["misfit"],
             "log10_p": r["score"]["logp"],
+            "verified_residual_energy": r.get("verify"),
             "fundamental_hz": float(np.mean([c.freq[k.key] for c in d.ctx if c.fit]))}
 
 
@@ -159,7 +160,14 @@ def _confidence(d, ranked):
         uniq, why = 1.0, "single consistent element"
     else:
         m1, m2 = ranked[0]["misfit"], ranked[1]["misfit"]
-        if m2 - m1 < 0.02:
+        v1, v2 = ranked[0].get("verify"), ranked[1].get("verify")
+        if m2 - m1 < 0.02 and v1 is not None and v2 is not None and v2 > 0 and math.isfinite(v2):
+            gain = float(np.clip(1.0 - v1 / v2, 0.0, 1.0))
+            uniq = 1.0 / len(ranked) + (1.0 - 1.0 / len(ranked)) * min(1.0, gain / 0.5)
+            why = (f"{len(ranked)} elements turn at the same frequency and fit the sensors' harmonics "
+                   f"equally; simulated with its estimate, {ranked[0]['cand'].element} leaves "
+                   f"{100 * gain:.0f} % less residual energy than {ranked[1]['cand'].element}")
+        elif m2 - m1 < 0.02:
             uniq = 1.0 / len(ranked)
             why = (f"{len(ranked)} elements turn at the same frequency and the sensors do not "
                    f"tell their patterns apart")
