@@ -121,6 +121,8 @@ def test_blind_case_and_subprocess_never_see_the_truth(line, tmp_path, fmus):
     f = truth["runs"][0]["fundamental_hz"]["idler_u1"]
     assert abs(f - 200 * B.FPM / (2 * math.pi * 1.5 * B.INCH)) / f < 0.02
     assert truth["effects"][0]["indistinguishable"] == ["idler_u1", "roller9"]
+    assert set(truth["runs"][0]["drive_torque"]) == {"unwind", "sw_leader", "rewind"}
+    assert truth["runs"][0]["drive_torque"]["unwind"]["max_Nm"] < 0  # an unwind holds back: no reversal
 
     # the diagnosis subprocess: only the blind folder, the holdout run flagged
     report = {"effects": [{"element": "roller9", "kind": "eccentricity", "fundamental_hz": f,
@@ -202,6 +204,13 @@ def test_scorer_counts_on_hand_made_reports():
     sc = B.score_case(t4, {"effects": [_eff("idler_u1", "eccentricity", ["idler_u1", "roller9"], f=5.0)]})
     assert [(m["mode"], m["element"]) for m in sc["matches"]] == [("exact", "idler_u1")]
     assert sc["missed"] == [{"element": "roller9", "kind": "eccentricity"}]
+    # backlash is only detectable where the drive torque reverses in a fit run
+    tq = _truth([("sw_leader", "backlash")], "backlash")
+    tq["runs"][0]["drive_torque"] = {"sw_leader": {"min_Nm": -2.0, "max_Nm": 0.05}}
+    assert B.torque_reverses(tq, "sw_leader") is True
+    tq["runs"][0]["drive_torque"] = {"sw_leader": {"min_Nm": 0.02, "max_Nm": 0.05}}
+    assert B.torque_reverses(tq, "sw_leader") is False
+    assert B.torque_reverses(tq, "unwind") is None
     # noise only: every reported effect is false
     t5 = _truth([], "noise_only")
     sc5 = B.score_case(t5, {"effects": [_eff("guide_in", "eccentricity", f=6.8)]})
