@@ -124,9 +124,14 @@ def _code_version(repo):
                               text=True, timeout=10).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--", "diagnosis", "orchestrator", "webline",
                                 "fmus"], cwd=repo, capture_output=True, text=True, timeout=10).stdout.split("\n")
-        return {"commit": head, "uncommitted": [ln[3:] for ln in dirty if ln.strip()]}
+        if head:
+            return {"commit": head, "uncommitted": [ln[3:] for ln in dirty if ln.strip()]}
     except (OSError, subprocess.SubprocessError):
-        return {"commit": None, "uncommitted": []}
+        pass
+    stamp = Path(repo) / ".git-commit"  # a snapshot (git archive) of a commit, written by whoever made it
+    if stamp.exists():
+        return {"commit": stamp.read_text().strip()[:12], "uncommitted": [], "snapshot": str(repo)}
+    return {"commit": None, "uncommitted": []}
 
 
 def rescore(out, log=None):
