@@ -416,7 +416,9 @@ def dominant_frequency(t, x, f_min=0.2, f_max=None):
     """(frequency Hz, amplitude) of the largest spectral peak of ``x(t)`` in [f_min, f_max].
 
     Mean and linear trend removed, Hann window, amplitude-corrected one-sided
-    spectrum; the peak is refined by a parabola through the log magnitudes of
+    spectrum; the largest local maximum in the band (so that leakage from a
+    stronger component just below ``f_min`` does not win at the band's edge)
+    is refined by a parabola through the log magnitudes of
     the three bins around it. (nan, nan) if there is no bin in the band or the
     signal is constant.
     """
@@ -442,7 +444,10 @@ def dominant_frequency(t, x, f_min=0.2, f_max=None):
     if not band.any():
         return math.nan, math.nan
     idx = np.flatnonzero(band)
-    k = int(idx[np.argmax(spec[idx])])
+    # the largest true local maximum in the band (not leakage from below f_min at its edge)
+    peaks = idx[(idx > 0) & (idx < len(spec) - 1)]
+    peaks = peaks[(spec[peaks] >= spec[peaks - 1]) & (spec[peaks] >= spec[peaks + 1])]
+    k = int(peaks[np.argmax(spec[peaks])] if peaks.size else idx[np.argmax(spec[idx])])
     if spec[k] <= 0:
         return math.nan, math.nan
     fk, ak = f[k], spec[k]

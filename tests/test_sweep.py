@@ -215,3 +215,11 @@ plot: {{type: frequency_vs_rotation, y: lc9.T.f_dom, roll: unwind,
         stamp = [(out / r["run_dir"] / "summary.json").stat().st_mtime_ns for r in rows]
         assert sweep_cmd.main(argv) == 0  # finished runs are skipped
         assert [(out / r["run_dir"] / "summary.json").stat().st_mtime_ns for r in rows] == stamp
+
+
+def test_dominant_frequency_ignores_leakage_at_the_band_edge():
+    import numpy as np
+    t = np.arange(0.0, 10.0, 1e-3)
+    x = 20 * np.sin(2 * np.pi * 0.15 * t) + 1.0 * np.sin(2 * np.pi * 3.3 * t)  # strong slow drift below f_min
+    f, _ = dominant_frequency(t, x, f_min=0.3)
+    assert f == pytest.approx(3.3, rel=5e-3)
