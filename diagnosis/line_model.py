@@ -156,6 +156,7 @@ class LineModel:
         paths = {k: str(v) for k, v in self.fmu_paths.items()}
         futures = [self._pool.submit(_worker_simulate, str(self.path), paths, run, doc, label)
                    for run, doc, label in jobs]
+        from concurrent.futures.process import BrokenProcessPool
         out = []
         for (run, doc, label), fut in zip(jobs, futures):
             try:
@@ -163,6 +164,14 @@ class LineModel:
             except (SimulationFailed, ValueError) as exc:
                 out.append(exc)
                 continue
+            except BrokenProcessPool:
+                # a worker died (e.g. the FMU files were rebuilt under it): finish in-process
+                log.warning("  a simulation worker died; continuing without workers")
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = None
+                self.jobs = 1
+                done = len(out)
+                return out + self.simulate_many(jobs[done:])
             self.n_sims += 1
             self.sim_wall += sim.wall
             log.info("  simulated %s%s: %.3g s of line in %.1f s (worker)", run.name,

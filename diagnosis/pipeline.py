@@ -532,9 +532,58 @@ class Diagnosis:
                                        float(np.linalg.norm(r["X"]))))
             self._verify_ties(ranked, fit)
             self.final_effects.append({"ranked": ranked, "eff": eff})
+            self._split_same_frequency(ranked, eff, fit)
             b = ranked[0]
             log.info("  %s: C = %s um, misfit %.3f", b["cand"].element,
                      ", ".join(f"{1e6 * abs(x):.1f}" for x in b["X"]), b["misfit"])
+
+    def _split_same_frequency(self, ranked, eff, fit):
+        """Several elements turning at the same speed (equal radii) may all be eccentric,
+        each loading the sensors with its own pattern. While the measured harmonics
+        left by the chosen elements are significant, the candidate that explains the
+        rest best becomes one more effect; the coefficients of all of them are then
+        solved jointly (per order: M = sum_e G_e X_e over sensors and fit runs)."""
+        chosen = [ranked[0]]
+        others = [r for r in ranked[1:]]
+        M, W = ranked[0]["M"], ranked[0]["W"]
+        T = np.array([c.T for c in fit if self.orders_for(c, ranked[0]["cand"].key) for _ in c.sensors])
+        while others:
+            res = M - sum(r["G"] * r["X"][None, :] for r in chosen)
+            z = float(np.sum(np.abs(res) ** 2 * (W * T)[:, None] / 2.0))
+            share = float(np.sum(np.abs(res) ** 2 * W[:, None]) / max(np.sum(np.abs(M) ** 2 * W[:, None]), 1e-300))
+            if z < 50.0 * M.shape[1] or share < 0.05:
+                break
+            fits = []
+            for r in others:
+                X, mis = est.solve_fourier(res, r["G"], W)
+                fits.append((mis, r, X))
+            mis, r, X = min(fits, key=lambda f: f[0])
+            if mis > 0.5:
+                break
+            r["X"] = np.where(np.abs(ranked[0]["X"]) > 0, X, 0.0)
+            chosen.append(r)
+            others.remove(r)
+            log.info("  %s also eccentric at the same frequency: explains %.0f %% of what %s leaves",
+                     r["cand"].element, 100 * (1 - mis), ", ".join(x["cand"].element for x in chosen[:-1]))
+        if len(chosen) < 2:
+            return
+        # joint least squares per order over the chosen elements
+        for j in range(M.shape[1]):
+            cols = [r for r in chosen if abs(r["X"][j]) > 0]
+            if not cols:
+                continue
+            A = np.column_stack([r["G"][:, j] for r in cols]) * np.sqrt(W)[:, None]
+            x, *_ = np.linalg.lstsq(A, M[:, j] * np.sqrt(W), rcond=None)
+            for r, xj in zip(cols, x):
+                r["X"][j] = xj
+        frac = [float(np.sum(W[:, None] * np.abs(r["G"] * r["X"][None, :]) ** 2)) for r in chosen]
+        for r, fr in zip(chosen, frac):
+            r["share"] = ranked[0]["score"]["share"] * fr / max(sum(frac), 1e-300)
+        for r in chosen[1:]:
+            rest = [x for x in ranked if x is not r and all(x is not y for y in chosen)]
+            r["misfit"] = est.solve_fourier(M - sum(x["G"] * x["X"][None, :] for x in chosen if x is not r),
+                                            r["G"], W)[1]
+            self.final_effects.append({"ranked": [r] + rest, "eff": eff, "same_frequency_as": ranked[0]["cand"].element})
 
     def _verify_ties(self, ranked, fit):
         """Candidates whose patterns fit equally well (one load cell: all exactly) are
@@ -612,12 +661,11 @@ class Diagnosis:
         self.steps = []
         doc = self.model.copy_doc()
         self.steps.append({"added": None, "sims": {c.name: c.nominal for c in self.ctx}})
+        if self.opt.polish and self.final_effects:
+            self._polish_all(doc)
         for i, fe in enumerate(self.final_effects):
             b = fe["ranked"][0]
             X = b["X"]
-            if self.opt.polish:
-                X = self._polish(doc, b, X)
-                b["X"] = X
             doc = layout_edit.with_fourier(doc, b["cand"], np.abs(X), np.angle(X), add=True)
             sims = self._simulate_all(doc, f"refined +{b['cand'].element}")
             self.steps.append({"added": b["cand"].element, "kind": b["cand"].kind, "sims": sims})
@@ -644,6 +692,56 @@ class Diagnosis:
             if isinstance(sim, Exception):
                 raise SimulationFailed(f"run {c.name} ({label}): {sim}")
         return {c.name: sim for c, sim in zip(ctxs, sims)}
+
+    def _polish_all(self, doc):
+        """One Gauss-Newton step for all periodic effects at once: simulate with every
+        estimate, fit the harmonics left in the data on each element's angle, and
+        correct the coefficients (jointly for elements at the same frequency)."""
+        fit = self.fit_ctx()
+        trial = doc
+        for fe in self.final_effects:
+            b = fe["ranked"][0]
+            trial = layout_edit.with_fourier(trial, b["cand"], np.abs(b["X"]), np.angle(b["X"]), add=True)
+        try:
+            sims = self._simulate_all(trial, "polish", fit)
+        except SimulationFailed as exc:
+            log.warning("  polish skipped: %s", exc)
+            return
+        H = self.opt.harmonics
+        groups = {}
+        for fe in self.final_effects:
+            groups.setdefault(id(fe["eff"]), []).append(fe["ranked"][0])
+        for members in groups.values():
+            k = members[0]["cand"]
+            Ms = []
+            for c in fit:
+                orders = self.orders_for(c, k.key)
+                if not orders:
+                    continue
+                th = self._theta_refined(c, k)
+                for s in c.sensors:
+                    r = est.split_slow_periodic(c.meas[s] - sims[c.name].columns[s], c.fs, c.fc)[1]
+                    m = np.zeros(H, complex)
+                    for i, (j, y) in enumerate(zip(orders, est.fit_harmonics(r, th, orders, c.mask))):
+                        m[j - 1] = y
+                    Ms.append(m)
+            if not Ms:
+                continue
+            Mp = np.array(Ms)
+            W = members[0]["W"]
+            if Mp.shape != members[0]["M"].shape:
+                continue
+            for j in range(H):
+                cols = [b for b in members if abs(b["X"][j]) > 0]
+                if not cols:
+                    continue
+                A = np.column_stack([b["G"][:, j] for b in cols]) * np.sqrt(W)[:, None]
+                dx, *_ = np.linalg.lstsq(A, Mp[:, j] * np.sqrt(W), rcond=None)
+                for b, d in zip(cols, dx):
+                    b["X"][j] = b["X"][j] + d
+            before = float(np.sum(np.abs(members[0]["M"]) ** 2))
+            log.info("  polish %s: harmonics left %.2g %% of measured", ", ".join(b["cand"].element for b in members),
+                     100 * float(np.sum(np.abs(Mp) ** 2)) / before if before else 0.0)
 
     def _polish(self, doc, b, X):
         """One Gauss-Newton step: simulate with X, fit the remaining harmonics, correct X."""

@@ -122,8 +122,9 @@ def _effects(d):
             "harmonics": [{"order": j + 1, "amplitude": float(abs(X[j])), "phase": float(np.angle(X[j]))}
                           for j in range(len(X)) if abs(X[j]) > 0],
             "harmonics_unit": {"amplitude": "m", "phase": "rad"},
-            "explained_share": score["share"],
-            "explained_share_of_residual": score["E"] / d.total_resid if d.total_resid > 0 else 0.0,
+            "explained_share": b.get("share", score["share"]),
+            "explained_share_of_residual": (b.get("share", score["share"]) * d.total_periodic / d.total_resid
+                                            if d.total_resid > 0 else 0.0),
             "confidence": conf,
             "confidence_basis": why,
             "log10_p": score["logp"],
