@@ -21,8 +21,10 @@ Measures, in this order, and writes ``bench/results.json`` plus a table on stdou
    as "measured", diagnosed against the nominal EWL), in a subprocess with a
    time limit; "not available" if the command does not exist.
 
-Simulated durations are chosen to keep the whole bench near 10 minutes on a
-2-core machine; ``--quick`` shortens everything (a smoke test of the bench).
+Each section runs in its own child process (a crash is recorded as that
+section's error and the others still run) on a private copy of the built
+FMUs. Simulated durations are chosen to keep the whole bench near 10 minutes
+on a 2-core machine; ``--quick`` shortens everything (a smoke test of the bench).
 No timing is asserted anywhere: the numbers are a record, not a test.
 """
 import argparse
@@ -461,12 +463,55 @@ def table(res):
     return "\n".join(lines)
 
 
+SECTIONS = ("rtf", "fmu_share", "scaling", "cosim_vs_reference", "diagnose")
+
+
+def run_section(name, cfg, paths, work):
+    """One section, in this process."""
+    if name == "rtf":
+        return bench_rtf(paths, cfg["rtf_duration"])
+    if name == "fmu_share":
+        return bench_fmu_share(paths, cfg["share_duration"])
+    if name == "scaling":
+        return bench_scaling(paths, cfg["scaling_sizes"], cfg["scaling_duration"], work)
+    if name == "cosim_vs_reference":
+        return bench_cosim_vs_reference(paths, cfg["compare_duration"], cfg["compare_rtols"])
+    if name == "diagnose":
+        return bench_diagnose(paths, cfg["diagnose_duration"], cfg["diagnose_timeout"], work)
+    raise KeyError(name)
+
+
+def section_child(argv):
+    """``run_bench.py --section NAME CONFIG.json RESULT.json``: one section in a child process."""
+    import faulthandler
+    faulthandler.enable()
+    name, cfg_path, out_path = argv
+    job = json.loads(Path(cfg_path).read_text())
+    paths = {k: Path(v) for k, v in job["fmu_paths"].items()}
+    res = run_section(name, job["cfg"], paths, job["work"])
+    Path(out_path).write_text(json.dumps(res, default=float))
+    return 0
+
+
+def snapshot_fmus(work):
+    """Copy the built FMUs into the bench's folder: a rebuild by someone else during the
+    bench cannot change (or truncate) what is being measured."""
+    import shutil
+    from fmus.build import source_hash
+    built = fmus()
+    dst = Path(work) / "fmus"
+    dst.mkdir()
+    return {k: Path(shutil.copy2(v, dst / Path(v).name)) for k, v in built.items()}, source_hash()
+
+
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--section"]:
+        return section_child(argv[1:])
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="short runs only (smoke test of the bench)")
     ap.add_argument("--out", type=Path, default=OUT_JSON, help=f"results file (default {OUT_JSON})")
-    ap.add_argument("--skip", nargs="*", default=[],
-                    choices=["rtf", "fmu_share", "scaling", "cosim_vs_reference", "diagnose"])
+    ap.add_argument("--skip", nargs="*", default=[], choices=SECTIONS)
     ap.add_argument("--diagnose-timeout", type=float, default=None, help="s (default: what is left of 10 min, >= 60 s)")
     args = ap.parse_args(argv)
     q = args.quick
@@ -474,40 +519,50 @@ def main(argv=None):
            "scaling_sizes": [10, 20] if q else [10, 20, 40, 80], "scaling_duration": 0.2 if q else 0.5,
            "compare_duration": 0.3 if q else 2.0,
            "compare_rtols": [1e-3, 1e-5] if q else [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8],
-           "diagnose_duration": 60.0, "budget_s": 600.0}
+           "diagnose_duration": 60.0, "budget_s": 600.0, "section_timeout_s": 900.0}
     t0 = time.perf_counter()
     res = {"machine": machine_info(), "config": cfg}
     print(f"bench on {res['machine']['cpu_model']} ({res['machine']['logical_cores']} cores), "
           f"Python {res['machine']['python']}", file=sys.stderr)
-    paths = fmus()
     with tempfile.TemporaryDirectory(prefix="webline_bench_") as work:
-        steps = [("rtf", lambda: bench_rtf(paths, cfg["rtf_duration"])),
-                 ("fmu_share", lambda: bench_fmu_share(paths, cfg["share_duration"])),
-                 ("scaling", lambda: bench_scaling(paths, cfg["scaling_sizes"], cfg["scaling_duration"], work)),
-                 ("cosim_vs_reference", lambda: bench_cosim_vs_reference(paths, cfg["compare_duration"],
-                                                                         cfg["compare_rtols"])),
-                 ("diagnose", lambda: bench_diagnose(
-                     paths, cfg["diagnose_duration"],
-                     args.diagnose_timeout or max(60.0, cfg["budget_s"] - (time.perf_counter() - t0)), work))]
-        for name, fn in steps:
+        paths, fmu_hash = snapshot_fmus(work)
+        res["fmu_source_hash"] = fmu_hash
+        for name in SECTIONS:
             if name in args.skip or (q and name == "diagnose"):
                 res[name] = {"status": "skipped"}
                 continue
             print(f"bench: {name} ...", file=sys.stderr)
+            if name == "diagnose":
+                cfg["diagnose_timeout"] = args.diagnose_timeout or max(
+                    60.0, cfg["budget_s"] - (time.perf_counter() - t0))
+            # each section in its own process: a crash in one (an FMU or the
+            # master dying) is recorded and the others still run
+            job, out = Path(work) / f"{name}.json", Path(work) / f"{name}.result.json"
+            job.write_text(json.dumps({"cfg": cfg, "work": work,
+                                       "fmu_paths": {k: str(v) for k, v in paths.items()}}))
             t = time.perf_counter()
             try:
-                res[name] = fn()
-            except Exception as exc:
-                import traceback
-                traceback.print_exc()
-                res[name] = {"error": f"{type(exc).__name__}: {exc}"[:800]}
+                p = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--section", name,
+                                    str(job), str(out)], cwd=ROOT, timeout=cfg["section_timeout_s"]
+                                   + cfg.get("diagnose_timeout", 0.0) * (name == "diagnose"))
+                if p.returncode == 0 and out.exists():
+                    res[name] = json.loads(out.read_text())
+                elif p.returncode < 0:
+                    res[name] = {"error": f"section process killed by signal {-p.returncode} "
+                                          "(a crash: see the fault handler's traceback above)"}
+                else:
+                    res[name] = {"error": f"section process exited with {p.returncode} (traceback above)"}
+            except subprocess.TimeoutExpired:
+                res[name] = {"error": f"section timed out after {cfg['section_timeout_s']:.0f} s"}
             res[name]["bench_section_wall_s"] = time.perf_counter() - t
     res["bench_wall_s"] = time.perf_counter() - t0
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(res, indent=1, default=float))
+    tmp = args.out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(res, indent=1, default=float))
+    os.replace(tmp, args.out)
     print(table(res))
     print(f"\n-> {args.out}")
-    return 0
+    return 0 if not any("error" in res.get(n, {}) for n in SECTIONS) else 1
 
 
 if __name__ == "__main__":
