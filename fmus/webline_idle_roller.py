@@ -12,7 +12,7 @@ if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "
     for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
         del sys.modules[_name]
 
-from webline.fmi_slave import ElementSlave, Var, finite, non_negative, positive
+from webline.fmi_slave import ElementSlave, Var, finite, non_negative, positive, tension_rate_input
 from webline.physics.roller import IdleRollerModel
 
 
@@ -28,11 +28,15 @@ class IdleRoller(ElementSlave):
     INPUTS = (
         Var("T_in", "N", 0.0, "Tension of the span entering the roller (T_i)"),
         Var("T_out", "N", 0.0, "Tension of the span leaving the roller (T_{i+1})"),
+        tension_rate_input("dT_in", "T_in"),
+        tension_rate_input("dT_out", "T_out"),
     )
     OUTPUTS = (
         Var("omega", "rad/s", 0.0, "Angular speed of the roller"),
         Var("theta", "rad", 0.0, "Angle of the roller"),
         Var("v", "m/s", 0.0, "Web speed on the roller, R*omega"),
+        Var("a", "m/s2", 0.0, "Web acceleration on the roller R*d(omega)/dt (rate input for the adjacent "
+            "spans' extrapolation of v)", depends=("T_in", "T_out")),
     )
 
     def make_model(self):

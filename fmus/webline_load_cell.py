@@ -14,7 +14,7 @@ if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "
     for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
         del sys.modules[_name]
 
-from webline.fmi_slave import ElementSlave, Var, finite, non_negative
+from webline.fmi_slave import ElementSlave, Var, finite, non_negative, tension_rate_input
 from webline.physics.load_cell import LoadCellModel
 
 
@@ -34,6 +34,8 @@ class LoadCell(ElementSlave):
     INPUTS = (
         Var("T_in", "N", 0.0, "Tension of the span entering the roller"),
         Var("T_out", "N", 0.0, "Tension of the span leaving the roller"),
+        tension_rate_input("dT_in", "T_in"),
+        tension_rate_input("dT_out", "T_out"),
     )
     OUTPUTS = (
         Var("T", "N", 0.0, "Measured tension", depends=("T_in", "T_out")),

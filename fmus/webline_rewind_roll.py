@@ -13,7 +13,8 @@ if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "
     for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
         del sys.modules[_name]
 
-from webline.fmi_slave import ElementSlave, Var, drive_from, material_roll_outputs, material_roll_parameters
+from webline.fmi_slave import (ElementSlave, Var, drive_from, material_roll_outputs, material_roll_parameters,
+                               tension_rate_input)
 from webline.physics.material_roll import RewindRollModel
 
 
@@ -23,8 +24,9 @@ class RewindRoll(ElementSlave):
     INPUTS = (
         Var("tau", "N.m", 0.0, "Motor torque in the direction of rotation (tau_r of {8})"),
         Var("T_in", "N", 0.0, "Tension of the span entering the roll (T_n)"),
+        tension_rate_input("dT_in", "T_in"),
     )
-    OUTPUTS = material_roll_outputs()
+    OUTPUTS = material_roll_outputs("T_in")
 
     def make_model(self):
         return RewindRollModel(self.R0, self.R_core, self.thickness, self.width, self.rho, self.J_core,

@@ -36,17 +36,25 @@ class Span(ElementSlave):
         Var("v_out", "m/s", 1.0, "Web speed on the downstream element"),
         Var("T_in", "N", 0.0, "Tension of the web entering the span (upstream span; 0 after an unwind)"),
         Var("theta_up", "rad", 0.0, "Angle of the upstream element"),
-        Var("omega_up", "rad/s", 0.0, "Angular speed of the upstream element"),
+        Var("omega_up", "rad/s", 0.0, "Angular speed of the upstream element", rate_of="theta_up"),
         Var("theta_down", "rad", 0.0, "Angle of the downstream element"),
-        Var("omega_down", "rad/s", 0.0, "Angular speed of the downstream element"),
+        Var("omega_down", "rad/s", 0.0, "Angular speed of the downstream element", rate_of="theta_down"),
         Var("L_ext", "m", 1.0, "Span length (length_mode 1)"),
         Var("dL_ext", "m/s", 0.0, "Span length rate (length_mode 1)"),
+        Var("a_in", "m/s2", 0.0, "Web acceleration on the upstream element (extrapolates v_in inside a step; "
+            "0 holds it)", rate_of="v_in"),
+        Var("a_out", "m/s2", 0.0, "Web acceleration on the downstream element (extrapolates v_out inside a "
+            "step; 0 holds it)", rate_of="v_out"),
+        Var("dT_in", "N/s", 0.0, "Rate of T_in (extrapolates T_in inside a step; 0 holds it)", rate_of="T_in"),
     )
     OUTPUTS = (
         Var("T", "N", 100.0, "Web tension in the span"),
         Var("L", "m", 1.0, "Span length", depends=("theta_up", "theta_down", "L_ext")),
         Var("dL", "m/s", 0.0, "Span length rate dL/dt",
             depends=("theta_up", "omega_up", "theta_down", "omega_down", "dL_ext")),
+        Var("dT", "N/s", 0.0, "Tension rate dT/dt ({20}; rate input for the extrapolation of T by its "
+            "neighbours)", depends=("v_in", "v_out", "T_in", "theta_up", "omega_up", "theta_down",
+                                    "omega_down", "L_ext", "dL_ext")),
     )
 
     def make_model(self):

@@ -14,7 +14,8 @@ if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "
     for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
         del sys.modules[_name]
 
-from webline.fmi_slave import ElementSlave, Var, drive_from, material_roll_outputs, material_roll_parameters
+from webline.fmi_slave import (ElementSlave, Var, drive_from, material_roll_outputs, material_roll_parameters,
+                               tension_rate_input)
 from webline.physics.material_roll import UnwindRollModel
 
 
@@ -24,8 +25,9 @@ class UnwindRoll(ElementSlave):
     INPUTS = (
         Var("tau", "N.m", 0.0, "Motor torque in the direction of rotation (= -tau_u of {1})"),
         Var("T_out", "N", 0.0, "Tension of the span leaving the roll (T_1)"),
+        tension_rate_input("dT_out", "T_out"),
     )
-    OUTPUTS = material_roll_outputs()
+    OUTPUTS = material_roll_outputs("T_out")
 
     def make_model(self):
         return UnwindRollModel(self.R0, self.R_core, self.thickness, self.width, self.rho, self.J_core,

@@ -525,6 +525,7 @@ class _Builder:
         self.profiles = {}
         self.line_speed = self._points(L.experiment.line_speed)
         self.op = self._operating_point()
+        self.extrapolate = L.experiment.coupling == "extrapolate"
 
         for name, pts in self._tension_refs().items():
             self.profiles[name] = pts
@@ -670,6 +671,9 @@ class _Builder:
                                self.L.path[r].name, "load_cell"), ("sensors", name))
             self.connect(self.span_names[r - 1], "T", name, "T_in")
             self.connect(self.span_names[r], "T", name, "T_out")
+            if self.extrapolate:
+                self.connect(self.span_names[r - 1], "dT", name, "dT_in")
+                self.connect(self.span_names[r], "dT", name, "dT_out")
 
     def _tension_loops(self):
         self.trim_of = {}
@@ -740,12 +744,20 @@ class _Builder:
         if e.type in lm.DRIVEN_TYPES:
             params.update(_drive_params(loop.drive if loop else None))
         inputs = {}
+        # A driven element holds its torque over a macro step, and the torque's feed-forward
+        # R (T_in - T_out) cancels the web pull only if the tensions are held too: its
+        # tension rates stay unconnected (measured: 10x smaller error on lc15/lc19).
+        extrapolate = self.extrapolate and e.type not in lm.DRIVEN_TYPES
         if i > 0:
             inputs["T_in"] = op.T[i - 1]
             self.connect(self.span_names[i - 1], "T", e.name, "T_in")
+            if extrapolate:
+                self.connect(self.span_names[i - 1], "dT", e.name, "dT_in")
         if i < n - 1:
             inputs["T_out"] = op.T[i]
             self.connect(self.span_names[i], "T", e.name, "T_out")
+            if extrapolate:
+                self.connect(self.span_names[i], "dT", e.name, "dT_out")
         if e.type in lm.DRIVEN_TYPES:
             comp, tau = self.speed_pi[e.name]
             inputs["tau"] = tau
@@ -773,8 +785,13 @@ class _Builder:
         self.add(Component(name, "Span", params, inputs, a.name, "span"), ("path", k, "span"))
         self.connect(a.name, "v", name, "v_in")
         self.connect(b.name, "v", name, "v_out")
+        if self.extrapolate:
+            self.connect(a.name, "a", name, "a_in")
+            self.connect(b.name, "a", name, "a_out")
         if k > 0:
             self.connect(self.span_names[k - 1], "T", name, "T_in")
+            if self.extrapolate:
+                self.connect(self.span_names[k - 1], "dT", name, "dT_in")
         if any(C_up) and mode == 0:
             self.connect(a.name, "theta", name, "theta_up")
             self.connect(a.name, "omega", name, "omega_up")
@@ -783,10 +800,12 @@ class _Builder:
             self.connect(b.name, "omega", name, "omega_down")
 
     def _apply_max_substep(self):
-        h = self.L.experiment.max_substep
-        if h is not None:
-            for c in self.components:
-                c.parameters["max_step"] = h
+        # Default: one RK4 sub-step per macro step. Inside one FMU the dynamics are slow
+        # (the fast web modes couple FMUs); a stiff drive shaft picks its own sub-step.
+        x = self.L.experiment
+        h = x.max_substep if x.max_substep is not None else x.step
+        for c in self.components:
+            c.parameters["max_step"] = h
 
     # -- meta
     def _meta(self):

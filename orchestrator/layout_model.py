@@ -330,8 +330,12 @@ class Experiment(Strict):
     algorithm: Literal["jacobi", "gauss-seidel"] = _doc(
         "Master algorithm. Gauss-Seidel is the default: Jacobi's held inputs make the undamped span-roller "
         "modes (tens of Hz) grow at a 1 ms step", default="gauss-seidel")
+    coupling: Literal["extrapolate", "hold"] = _doc(
+        "How FMUs see the web coupling inside a macro step: 'extrapolate' advances span tensions and "
+        "roller speeds linearly with their rates (tension rate dT, web acceleration a; second order), "
+        "'hold' keeps them constant (first order)", default="extrapolate")
     output_interval: NonNegTime = _doc("Recording interval (0: every macro step)", default=0.0)
-    max_substep: Optional[PositiveTime] = _doc("Longest RK4 sub-step inside every FMU (FMU default 1 ms)",
+    max_substep: Optional[PositiveTime] = _doc("Longest RK4 sub-step inside every FMU (default: the macro step)",
                                                default=None)
     line_speed: SpeedProfileField = _doc("Speed of the speed master: a constant or {initial, segments}")
     tension: dict[Name, TensionProfileField] = _doc("Reference per tension zone (drives.tension_loops): a "

@@ -17,7 +17,13 @@ The master knows FMI, not physics. One screen per concept, as in libcosim:
   ``Span.L``/``dL``) are resolved after every step in topological order of the
   dependencies declared in the modelDescription; a cycle among them is a real
   algebraic loop and is reported before anything runs;
-* **algorithms** (:func:`jacobi_step`, :func:`gauss_seidel_step`): fixed macro step;
+* **algorithms** (:func:`jacobi_step`, :func:`gauss_seidel_step`): fixed macro step.
+  Rate inputs (an input whose FMI ``derivative`` attribute names another input: the
+  FMU extrapolates that input linearly with it inside a step) are fed with the values
+  at the start of the step: Gauss-Seidel resolves the outputs feeding them once at the
+  end of each round instead of before every slave, and anchors an extrapolated input
+  whose source already stepped back to the step start (value - h * rate), so the FMU
+  interpolates over the step instead of running a step ahead;
 * **observer** (:class:`orchestrator.results.Recorder`): one row of ``y`` per
   output interval into a preallocated array.
 
@@ -101,6 +107,11 @@ class FmuModel:
             deps = unknown.dependencies
             self.outputs[unknown.variable.name] = (tuple(self.inputs) if deps is None
                                                    else tuple(d.name for d in deps if d.causality == "input"))
+        # input -> input that is its time derivative (FMI ``derivative`` attribute on an input):
+        # the FMU advances the first linearly with the second inside a step
+        self.rates = {v.derivative.name: v.name for v in self.md.modelVariables
+                      if v.causality == "input" and v.derivative is not None
+                      and v.derivative.causality == "input"}
         self._dll = None
 
     def dll(self):
@@ -288,6 +299,7 @@ class Plan:
         self.groups, self.sinks, self.chains = groups, sinks, chains
         self.gs_order = [(chains[s.name], s) for s in slaves]
         self.gauss_seidel = False  # set by simulate: complete() then resolves the groups
+        self.rate_groups, self.other_groups = [], list(groups)  # set by plan_coupling
         self.columns, self.units, self.descriptions = columns, units, descriptions
 
 
@@ -436,9 +448,20 @@ def plan_coupling(slaves, connections):
             src.append(j)
             per_slave[s.name][0].append(s.u0 + i)
             per_slave[s.name][1].append(j)
+    order = {s.name: k for k, s in enumerate(slaves)}
     for s in slaves:
         s.dst = np.array(per_slave[s.name][0], dtype=np.intp)
         s.src = np.array(per_slave[s.name][1], dtype=np.intp)
+        # Gauss-Seidel: an input the FMU extrapolates (with a connected rate input) whose source
+        # stepped earlier in the round holds the value at t + h while the FMU is at t; it is
+        # anchored back, value - h * rate, so the FMU interpolates instead of running ahead.
+        back_v, back_r = [], []
+        for n, rate in s.model.rates.items():
+            if n in s.inputs and rate in s.inputs and order[feeds[(s.name, n)][0]] < order[s.name]:
+                back_v.append(s.u0 + s.inputs.index(n))
+                back_r.append(s.u0 + s.inputs.index(rate))
+        s.back_v = np.array(back_v, dtype=np.intp) if back_v else None
+        s.back_r = np.array(back_r, dtype=np.intp)
 
     # Gauss-Seidel schedule: before slave k steps, the feed-through groups its inputs
     # need (transitively, in topological order) that changed since they were last
@@ -462,9 +485,17 @@ def plan_coupling(slaves, connections):
 
     for g in groups:
         sources_of(g)
+    #
+    # Rate inputs (the FMI ``derivative`` of another input: only used to extrapolate it
+    # inside a step) are left out of these chains: a rate one step old changes the
+    # extrapolated value by O(h^2) only. The groups feeding them are resolved once per
+    # round instead, after every slave stepped (``Plan.rate_groups``).
+    def is_rate(s, n):
+        return n in s.model.rates.values()
+
     chains, valid = {}, set()
     for s in slaves:
-        need, stack = set(), [feeds[(s.name, n)] for n in s.inputs]
+        need, stack = set(), [feeds[(s.name, n)] for n in s.inputs if not is_rate(s, n)]
         while stack:
             node = stack.pop()
             g = group_of.get(node)
@@ -475,8 +506,20 @@ def plan_coupling(slaves, connections):
         chains[s.name] = [g for g in groups if id(g) in need and id(g) not in valid]
         valid |= {id(g) for g in chains[s.name]}
         valid -= {id(g) for g in groups if s.name in sources[id(g)]}
-    return Plan(slaves, y, u, np.array(dst, dtype=np.intp), np.array(src, dtype=np.intp),
+    need, stack = set(), [feeds[(s.name, n)] for s in slaves for n in s.inputs if is_rate(s, n)]
+    while stack:
+        node = stack.pop()
+        g = group_of.get(node)
+        if g is None or id(g) in need:
+            continue
+        need.add(id(g))
+        stack.extend(feeds[(g.slave.name, n)] for n in g.deps)
+    rate_groups = [g for g in groups if id(g) in need]
+    plan = Plan(slaves, y, u, np.array(dst, dtype=np.intp), np.array(src, dtype=np.intp),
                 groups, sinks, chains, columns, units, descriptions)
+    plan.rate_groups = rate_groups
+    plan.other_groups = [g for g in groups if id(g) not in need]
+    return plan
 
 
 # ---- algorithms ---------------------------------------------------------------------
@@ -538,6 +581,8 @@ def gauss_seidel_step(plan, t, h):
             resolve(chain, y, u, t)
         if s.set_inputs is not None:
             u[s.dst] = y[s.src]
+            if s.back_v is not None:
+                u[s.back_v] -= h * u[s.back_r]
             st = s.set_inputs()
             if st:
                 _fail(s, "fmi2SetReal", st, t)
@@ -548,14 +593,16 @@ def gauss_seidel_step(plan, t, h):
             st = s.get_state()
             if st:
                 _fail(s, "fmi2GetReal", st, t1)
+    if plan.rate_groups:
+        resolve(plan.rate_groups, y, u, t1)
 
 
 def complete(plan, t):
     """Make every output consistent at ``t`` before it is recorded: the feed-through
     groups (Gauss-Seidel leaves them to the next step) and the outputs nothing
     depends on (read only here)."""
-    if plan.gauss_seidel:
-        resolve(plan.groups, plan.y, plan.u, t)
+    if plan.gauss_seidel:  # the rate groups were resolved at the end of the step
+        resolve(plan.other_groups, plan.y, plan.u, t)
     for s in plan.slaves:
         if s.get_rest is not None:
             st = s.get_rest()

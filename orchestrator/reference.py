@@ -15,7 +15,9 @@ and calls ``make_model()``). The models are then assembled into one ODE:
   model's ``derivatives`` is called with the current inputs.
 
 Inputs that no connection feeds keep their start values. Angles are exact
-states of the rotating elements, so no input extrapolation is needed.
+states of the rotating elements, so no input extrapolation is needed; the
+rate inputs that only drive the FMUs' extrapolation (``RATE_INPUTS``: a span's
+``a_in``/``a_out``/``dT_in``, a roller's ``dT_in``/``dT_out``) are left unconnected.
 
 ``simulate_reference(system)`` solves it with ``scipy.integrate.solve_ivp``
 (LSODA, rtol 1e-8 by default) and samples every output at the master's output
@@ -141,6 +143,8 @@ class ReferenceSystem:
             if k.dst_var not in md.INPUTS:
                 raise KeyError(f"connection {k}: {k.dst}.{k.dst_var} is not an input of {system.components[d].model} "
                                f"(inputs: {', '.join(md.INPUTS)})")
+            if k.dst_var in getattr(md, "RATE_INPUTS", ()):
+                continue  # only extrapolates an input inside a macro step: no meaning in one ODE
             o, i = ms.OUTPUTS.index(k.src_var), md.INPUTS.index(k.dst_var)
             feeder[(d, i)] = (s, o)
             self.routes.append((s, o, d, i))

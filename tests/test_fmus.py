@@ -17,25 +17,28 @@ H8 = range(1, 9)
 DRIVE = ["drive.enabled", "drive.J_motor", "drive.stiffness", "drive.damping", "drive.backlash"]
 ROLL_PARAMS = ["R0", "R_core", "thickness", "width", "rho", "J_core", "b", "omega0", "theta0", *DRIVE]
 ROLL_OUT = {n: [] for n in ("omega", "theta", "R", "v", "J", "omega_motor")}
+SPAN_IN = ["v_in", "v_out", "T_in", "theta_up", "omega_up", "theta_down", "omega_down", "L_ext", "dL_ext"]
 SPEED_IN = ["v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out"]
 
 # docs/architecture.md: parameters, inputs, {output: inputs it depends on}
 CONTRACT = {
     "Span": (["EA", "L0", "T0", "length_mode", "f_fixed"]
              + [f"{e}.{f}[{j}]" for e in ("up", "down") for j in H8 for f in ("C", "psi")],
-             ["v_in", "v_out", "T_in", "theta_up", "omega_up", "theta_down", "omega_down", "L_ext", "dL_ext"],
+             SPAN_IN + ["a_in", "a_out", "dT_in"],
              {"T": [], "L": ["theta_up", "theta_down", "L_ext"],
-              "dL": ["theta_up", "omega_up", "theta_down", "omega_down", "dL_ext"]}),
-    "UnwindRoll": (ROLL_PARAMS, ["tau", "T_out"], ROLL_OUT),
-    "RewindRoll": (ROLL_PARAMS, ["tau", "T_in"], ROLL_OUT),
-    "IdleRoller": (["R", "J", "b", "omega0", "theta0"], ["T_in", "T_out"], {"omega": [], "theta": [], "v": []}),
-    "DrivenRoller": (["R", "J", "b", "omega0", "theta0", *DRIVE], ["tau", "T_in", "T_out"],
-                     {"omega": [], "theta": [], "v": [], "omega_motor": []}),
+              "dL": ["theta_up", "omega_up", "theta_down", "omega_down", "dL_ext"], "dT": SPAN_IN}),
+    "UnwindRoll": (ROLL_PARAMS, ["tau", "T_out", "dT_out"], {**ROLL_OUT, "a": ["tau", "T_out"]}),
+    "RewindRoll": (ROLL_PARAMS, ["tau", "T_in", "dT_in"], {**ROLL_OUT, "a": ["tau", "T_in"]}),
+    "IdleRoller": (["R", "J", "b", "omega0", "theta0"], ["T_in", "T_out", "dT_in", "dT_out"],
+                   {"omega": [], "theta": [], "v": [], "a": ["T_in", "T_out"]}),
+    "DrivenRoller": (["R", "J", "b", "omega0", "theta0", *DRIVE], ["tau", "T_in", "T_out", "dT_in", "dT_out"],
+                     {"omega": [], "theta": [], "v": [], "omega_motor": [], "a": ["tau", "T_in", "T_out"]}),
     "SpeedPI": (["K_ref", "zeta", "w_ld", "tau_min", "tau_max", "feedforward", "b_ff", "I0"], SPEED_IN,
                 {"tau": SPEED_IN, "omega_ref": ["v_ref", "v_trim", "R"]}),
     "TensionPI": (["K", "w_i", "sign", "trim_min", "trim_max", "I0"], ["T_ref", "T_meas"],
                   {"v_trim": ["T_ref", "T_meas"]}),
-    "LoadCell": (["angle_in", "angle_out", "tau_filter", "noise_std", "seed", "T0"], ["T_in", "T_out"],
+    "LoadCell": (["angle_in", "angle_out", "tau_filter", "noise_std", "seed", "T0"],
+                 ["T_in", "T_out", "dT_in", "dT_out"],
                  {"T": ["T_in", "T_out"]}),
     "Profile": (["n"] + [f"{a}[{k}]" for k in range(1, 33) for a in ("t", "y")], [], {"y": []}),
 }
@@ -70,6 +73,51 @@ def test_variables_match_the_contract(fmus, model):
         deps = unknown.get("dependencies")
         assert deps is not None
         assert sorted(name_of[d] for d in deps.split()) == sorted(outputs[name_of[unknown.get("index")]])
+
+
+RATE_OF = {  # rate input -> the input it extrapolates (FMI ``derivative`` attribute)
+    "Span": {"omega_up": "theta_up", "omega_down": "theta_down", "a_in": "v_in", "a_out": "v_out",
+             "dT_in": "T_in"},
+    "UnwindRoll": {"dT_out": "T_out"}, "RewindRoll": {"dT_in": "T_in"},
+    "IdleRoller": {"dT_in": "T_in", "dT_out": "T_out"}, "DrivenRoller": {"dT_in": "T_in", "dT_out": "T_out"},
+    "LoadCell": {"dT_in": "T_in", "dT_out": "T_out"},
+}
+
+
+@pytest.mark.parametrize("model", sorted(CONTRACT))
+def test_rate_inputs_carry_the_derivative_attribute(fmus, model):
+    root = ET.fromstring(zipfile.ZipFile(fmus[model]).read("modelDescription.xml"))
+    svs = root.findall("ModelVariables/ScalarVariable")
+    found = {sv.get("name"): svs[int(sv.find("Real").get("derivative")) - 1].get("name")
+             for sv in svs if sv.find("Real").get("derivative")}
+    assert found == RATE_OF.get(model, {})
+    # and they are what the wrapper extrapolates
+    from webline.physics import load_cell, material_roll, roller, span
+    models = {"Span": span.SpanModel, "UnwindRoll": material_roll.UnwindRollModel,
+              "RewindRoll": material_roll.RewindRollModel, "IdleRoller": roller.IdleRollerModel,
+              "DrivenRoller": roller.DrivenRollerModel, "LoadCell": load_cell.LoadCellModel}
+    if model in models:
+        assert {r: v for v, r in models[model].EXTRAPOLATE.items()} == RATE_OF[model]
+
+
+def test_extrapolated_inputs_move_inside_a_step(fmus):
+    """An idle roller whose T_out moves with dT_out inside a step accelerates with the
+    integral of the moving tension; without the rate the tension is held."""
+    J, R = 0.01, 0.05
+    held = Instance(fmus["IdleRoller"], "held", {"R": R, "J": J}, {"T_in": 100.0, "T_out": 100.0}).init()
+    moving = Instance(fmus["IdleRoller"], "moving", {"R": R, "J": J},
+                      {"T_in": 100.0, "T_out": 100.0, "dT_out": 1000.0}).init()
+    for inst in (held, moving):
+        inst.step(0.0, 0.01)
+    (w_held,), (w_moving,) = held.get(["omega"]), moving.get(["omega"])
+    assert w_held == pytest.approx(0.0, abs=1e-12)
+    # J omega' = R (T_out - T_in) = R 1000 t: omega = R/J 1000 h^2/2
+    assert w_moving == pytest.approx(R / J * 1000.0 * 0.01 ** 2 / 2, rel=1e-9)
+    # the output a is R omega' at the end of the step (T_out extrapolated to t + h)
+    (a,) = moving.get(["a"])
+    assert a == pytest.approx(R * R / J * 1000.0 * 0.01, rel=1e-9)
+    held.free()
+    moving.free()
 
 
 BAD = [

@@ -22,7 +22,7 @@ def test_idle_roller_equal_tensions_keeps_speed():
     x = simulate(m, [150.0, 150.0], 2.0)
     assert x[0] == 12.0
     assert x[1] == pytest.approx(0.5 + 12.0 * 2.0, rel=1e-12)
-    assert m.outputs(2.0, x, [150.0, 150.0]) == [12.0, x[1], pytest.approx(0.6)]
+    assert m.outputs(2.0, x, [150.0, 150.0]) == [12.0, x[1], pytest.approx(0.6), 0.0]  # a = 0
 
 
 def test_idle_roller_friction_decays_exponentially():

@@ -29,7 +29,7 @@ from pythonfmu.enums import Fmi2Causality, Fmi2Initial, Fmi2Status, Fmi2Variabil
 
 from webline import __version__
 from webline.physics.drive import Drive
-from webline.physics.integrate import integrate
+from webline.physics.integrate import integrate, rk4_1, rk4_2, rk4_3, rk4_step
 
 # SI base-unit exponents of every unit an FMU may declare (FMI 2.0 BaseUnit).
 UNITS = {
@@ -53,6 +53,7 @@ UNITS = {
     "Hz": {"s": -1},
     "m/(s.N)": {"s": 1, "kg": -1},
     "N.s": {"kg": 1, "m": 1, "s": -1},
+    "N/s": {"kg": 1, "m": 1, "s": -3},
     "N.m/(rad/s)": {"kg": 1, "m": 2, "s": -1, "rad": -1},
 }
 
@@ -65,11 +66,14 @@ class Var:
     ``depends`` (outputs only): names of the inputs this output depends on
     directly (feed-through). Empty for outputs that are functions of states.
     ``check``: a callable value -> error string or None, run at initialisation.
+    ``rate_of`` (inputs only): the input this one is the time derivative of (the model's
+    ``EXTRAPOLATE``); written as the FMI ``derivative`` attribute so that a master can tell
+    which inputs move inside a step and at what rate.
     """
 
-    __slots__ = ("name", "unit", "start", "description", "depends", "check", "attr")
+    __slots__ = ("name", "unit", "start", "description", "depends", "check", "attr", "rate_of")
 
-    def __init__(self, name, unit, start, description, depends=(), check=None, attr=None):
+    def __init__(self, name, unit, start, description, depends=(), check=None, attr=None, rate_of=None):
         if unit not in UNITS:
             raise KeyError(f"unit {unit!r} of {name!r} is not in webline.fmi_slave.UNITS")
         self.name = name
@@ -79,6 +83,7 @@ class Var:
         self.depends = tuple(depends)
         self.check = check
         self.attr = attr or name.replace(".", "_").replace("[", "_").replace("]", "")
+        self.rate_of = rate_of
 
 
 def positive(value):
@@ -142,8 +147,9 @@ def material_roll_parameters():
     )
 
 
-def material_roll_outputs():
-    """Outputs shared by the UnwindRoll and RewindRoll FMUs (all functions of states)."""
+def material_roll_outputs(tension):
+    """Outputs shared by the UnwindRoll and RewindRoll FMUs (functions of states, except ``a``,
+    which also depends on the torque and the tension input named ``tension``)."""
     return (
         Var("omega", "rad/s", 0.0, "Angular speed of the roll"),
         Var("theta", "rad", 0.0, "Angle of the roll"),
@@ -152,7 +158,15 @@ def material_roll_outputs():
         Var("J", "kg.m2", 1.0, "Inertia the motor accelerates: J_0 + J_w ({3},{4}), "
             "plus drive.J_motor when the drive is enabled (K_p = J K_ref of {24})"),
         Var("omega_motor", "rad/s", 0.0, "Motor speed (equals omega with the ideal drive)"),
+        Var("a", "m/s2", 0.0, "Web acceleration at the roll surface d(R*omega)/dt (rate input for the "
+            "adjacent span's extrapolation of v)", depends=("tau", tension)),
     )
+
+
+def tension_rate_input(name, of):
+    """Rate input ``name`` (N/s) that extrapolates the tension input ``of`` inside a step."""
+    return Var(name, "N/s", 0.0, f"Rate of {of} (extrapolates {of} linearly inside a step; 0 holds it)",
+               rate_of=of)
 
 
 def fourier_vars(prefix, where):
@@ -220,11 +234,19 @@ class ElementSlave(Fmi2Slave):
         def get():
             if refresh or self.model is None:
                 self._refresh_if_dirty()
+            if self.model is not None:  # inputs and outputs live in lists once initialised
+                where = self._slot.get(attr)
+                if where is not None:
+                    return (self._u if where[0] else self._y)[where[1]]
             return getattr(self, attr)
 
         def set_(value):
             setattr(self, attr, value)
             if is_input:
+                if self.model is not None:
+                    i = self._slot[attr][1]
+                    self._u[i] = value
+                    self._t_set[i] = self.time
                 self.set_time[attr] = self.time
                 self.dirty = True
 
@@ -270,6 +292,15 @@ class ElementSlave(Fmi2Slave):
                                              for a, r in self.model.EXTRAPOLATE.items())]
         self._input_attrs = [self._attr_of(n) for n in self.model.INPUTS]
         self._output_attrs = [self._attr_of(n) for n in self.model.OUTPUTS]
+        # From here on inputs and outputs live in lists (model order): the per-step paths
+        # index them instead of going through attributes.
+        self._u = [getattr(self, a) for a in self._input_attrs]
+        self._t_set = [self.set_time.get(a, self.start_time) for a in self._input_attrs]
+        self._y = [getattr(self, a) for a in self._output_attrs]
+        self._slot = {a: (True, i) for i, a in enumerate(self._input_attrs)}
+        self._slot.update({a: (False, i) for i, a in enumerate(self._output_attrs)})
+        self._vr = None
+        self._step = {1: rk4_1, 2: rk4_2, 3: rk4_3}.get(len(self.model.STATES), rk4_step)
         self.x = list(self.model.initial_state())
         try:
             self._refresh_outputs()
@@ -286,19 +317,17 @@ class ElementSlave(Fmi2Slave):
     def _inputs(self, s):
         """Model inputs ``s`` seconds after the current time, extrapolated ones advanced
         linearly from the time they were set."""
-        attrs = self._input_attrs
-        u = [getattr(self, a) for a in attrs]
+        u = self._u[:]
         if self._input_index:
             t = self.time + s
-            set_time = self.set_time
+            t_set = self._t_set
             for i, r in self._input_index:
-                u[i] += u[r] * (t - set_time.get(attrs[i], self.start_time))
+                u[i] += u[r] * (t - t_set[i])
         return u
 
     def _refresh_outputs(self):
         y = self.model.outputs(self.time, self.x, self._inputs(0.0))
-        for a, value in zip(self._output_attrs, y):
-            setattr(self, a, value)
+        self._y = y
         self.dirty = False
         return y
 
@@ -334,35 +363,52 @@ class ElementSlave(Fmi2Slave):
     # Fast paths for the FMI get/set calls: pythonfmu's generic versions call a
     # getter closure and an isinstance per scalar; a line of ~50 FMUs makes
     # hundreds of these calls per macro step.
+    # After initialisation a table entry is (attr, feed-through, kind, index): kind 0 a
+    # parameter (attribute), 1 an input (self._u[index]), 2 an output (self._y[index]).
     def _vr_tables(self):
         tables = {}
         feed = {v.attr for v in self.OUTPUTS if v.depends}
-        inputs = {v.attr for v in self.INPUTS}
+        slot = self.__dict__.get("_slot") if self.model is not None else None
         by_name = {v.name: v.attr for v in (*self.parameters(), *self.INPUTS, *self.OUTPUTS)}
         for vr, var in self.vars.items():
             attr = by_name[var.name]
-            tables[vr] = (attr, attr in feed, attr in inputs)
-        self._vr = tables
+            where = slot.get(attr) if slot else None
+            kind = 0 if where is None else (1 if where[0] else 2)
+            tables[vr] = (attr, attr in feed, kind, where[1] if where else -1)
+        if slot is not None:  # tables made before initialisation are rebuilt once after it
+            self._vr = tables
         return tables
 
     def get_real(self, vrs):
         table = self.__dict__.get("_vr") or self._vr_tables()
         out = []
         for vr in vrs:
-            attr, feed, _ = table[vr]
+            attr, feed, kind, i = table[vr]
             if self.dirty and (feed or self.model is None):
                 self._refresh_if_dirty()
-            out.append(float(getattr(self, attr)))
+            if kind == 2:
+                out.append(float(self._y[i]))
+            elif kind == 1:
+                out.append(float(self._u[i]))
+            else:
+                out.append(float(getattr(self, attr)))
         return out
 
     def set_real(self, vrs, values):
         table = self.__dict__.get("_vr") or self._vr_tables()
         now = self.time
+        u, t_set = self.__dict__.get("_u"), self.__dict__.get("_t_set")
         for vr, value in zip(vrs, values):
-            attr, _, is_input = table[vr]
-            setattr(self, attr, value)
-            if is_input:
-                self.set_time[attr] = now
+            attr, _, kind, i = table[vr]
+            if kind == 1:
+                u[i] = value
+                t_set[i] = now
+            elif kind == 2:
+                self._y[i] = value
+            else:
+                setattr(self, attr, value)
+                if attr in self.__dict__.get("_slot", ()) or any(v.attr == attr for v in self.INPUTS):
+                    self.set_time[attr] = now
         self.dirty = True
 
     def do_step(self, current_time, step_size):
@@ -387,7 +433,7 @@ class ElementSlave(Fmi2Slave):
                         return model.derivatives(t, x, u0)
 
                 h_max = min(self.max_step, model.max_substep(self.x))
-                self.x = integrate(f, current_time, self.x, step_size, h_max)
+                self.x = integrate(f, current_time, self.x, step_size, h_max, self._step)
             self.time = current_time + step_size
             y = self._refresh_outputs()
         except Exception:
@@ -395,6 +441,8 @@ class ElementSlave(Fmi2Slave):
             self.log(f"{self.instance_name}: step at t={current_time:.6g} s failed\n"
                      f"{traceback.format_exc()}", Fmi2Status.error)
             return False
+        if math.isfinite(sum(y)):
+            return True
         for name, value in zip(self.model.OUTPUTS, y):
             if not math.isfinite(value):
                 self.failed = True
@@ -417,6 +465,10 @@ class ElementSlave(Fmi2Slave):
             real = sv.find("Real")
             real.set("unit", v.unit)
             used.add(v.unit)
+        for v in self.INPUTS:
+            if v.rate_of:
+                variables.findall("ScalarVariable")[index[v.name] - 1].find("Real").set(
+                    "derivative", str(index[v.rate_of]))
         # UnitDefinitions must follow CoSimulation (FMI 2.0 schema order).
         units = Element("UnitDefinitions")
         for u in sorted(used):

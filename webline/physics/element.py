@@ -7,7 +7,9 @@ An element model is a small class built from SI parameters with
 * ``STATES``, ``INPUTS``, ``OUTPUTS``: tuples of names (orders of the lists below);
 * ``EXTRAPOLATE``: {input: input that is its time derivative}; a co-simulation
   wrapper advances such inputs linearly inside a step (an element's angle
-  from its speed) instead of holding them;
+  from its speed, a tension from its rate) instead of holding them;
+* ``RATE_INPUTS``: inputs that only serve that extrapolation (the equations
+  never read them); the monolithic reference leaves them unconnected;
 * ``problems()`` -> list of (parameter, reason) for invalid parameters;
 * ``initial_state()`` -> list of floats;
 * ``derivatives(t, x, u)`` -> list (dx/dt), ``x`` states, ``u`` inputs;
@@ -27,6 +29,7 @@ class ElementModel:
     INPUTS = ()
     OUTPUTS = ()
     EXTRAPOLATE = {}
+    RATE_INPUTS = ()
 
     def problems(self):
         return []

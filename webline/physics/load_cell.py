@@ -70,8 +70,10 @@ class LoadCellModel(ElementModel):
     ``standard_normal(seed, t)``; 0 turns it off.
     """
 
-    INPUTS = ("T_in", "T_out")
+    INPUTS = ("T_in", "T_out", "dT_in", "dT_out")
     OUTPUTS = ("T",)
+    EXTRAPOLATE = {"T_in": "dT_in", "T_out": "dT_out"}
+    RATE_INPUTS = ("dT_in", "dT_out")
 
     def __init__(self, angle_in=0.0, angle_out=0.0, tau_filter=0.0, noise_std=0.0, seed=0, T0=0.0):
         self.angle_in, self.angle_out = angle_in, angle_out

@@ -60,7 +60,7 @@ class _MaterialRollModel(ElementModel):
     """
 
     WINDING = 0  # -1 unwind, +1 rewind
-    OUTPUTS = ("omega", "theta", "R", "v", "J", "omega_motor")
+    OUTPUTS = ("omega", "theta", "R", "v", "J", "omega_motor", "a")
 
     def __init__(self, R0, R_core, thickness, width, rho, J_core=0.0, b=0.0, omega0=0.0, theta0=0.0,
                  drive=None, tau0=0.0):
@@ -104,8 +104,13 @@ class _MaterialRollModel(ElementModel):
 
     def outputs(self, t, x, u):
         omega, theta, R = x[0], x[1], x[2]
-        J = self.roll_inertia(R) + (self.drive.J_motor if self.drive.enabled else 0.0)
-        return [omega, theta, R, R * omega, J, self.drive.motor_speed(omega, x[3:])]
+        J_roll = self.roll_inertia(R)
+        J = J_roll + (self.drive.J_motor if self.drive.enabled else 0.0)
+        # web acceleration d(R omega)/dt = R omega' + omega R'
+        tau_el, _ = self.drive.element_torque(u[0], theta, omega, x[3:])
+        a = (R * self._acceleration(omega, R, u[1], tau_el, J_roll)
+             + omega * radius_rate(omega, self.thickness, self.WINDING))
+        return [omega, theta, R, R * omega, J, self.drive.motor_speed(omega, x[3:]), a]
 
     def max_substep(self, x):
         return self.drive.max_substep(self.roll_inertia(x[2]))
@@ -120,7 +125,9 @@ class UnwindRollModel(_MaterialRollModel):
     """
 
     WINDING = -1
-    INPUTS = ("tau", "T_out")
+    INPUTS = ("tau", "T_out", "dT_out")
+    EXTRAPOLATE = {"T_out": "dT_out"}
+    RATE_INPUTS = ("dT_out",)
 
     def _radius_problems(self):
         if not self.R_core > 0.0 or self.R0 > self.R_core:
@@ -146,7 +153,9 @@ class RewindRollModel(_MaterialRollModel):
     """
 
     WINDING = 1
-    INPUTS = ("tau", "T_in")
+    INPUTS = ("tau", "T_in", "dT_in")
+    EXTRAPOLATE = {"T_in": "dT_in"}
+    RATE_INPUTS = ("dT_in",)
 
     def _radius_problems(self):
         if not self.R_core > 0.0 or self.R0 > self.R_core:

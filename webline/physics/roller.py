@@ -27,8 +27,10 @@ class IdleRollerModel(ElementModel):
     """Idle roller, {22} with tau = 0. States [omega, theta]; web speed v = R omega."""
 
     STATES = ("omega", "theta")
-    INPUTS = ("T_in", "T_out")
-    OUTPUTS = ("omega", "theta", "v")
+    INPUTS = ("T_in", "T_out", "dT_in", "dT_out")
+    OUTPUTS = ("omega", "theta", "v", "a")
+    EXTRAPOLATE = {"T_in": "dT_in", "T_out": "dT_out"}
+    RATE_INPUTS = ("dT_in", "dT_out")
 
     def __init__(self, R, J, b=0.0, omega0=0.0, theta0=0.0):
         self.R, self.J, self.b, self.omega0, self.theta0 = R, J, b, omega0, theta0
@@ -43,7 +45,8 @@ class IdleRollerModel(ElementModel):
         return [roller_acceleration(x[0], self.R, u[0], u[1], 0.0, self.J, self.b), x[0]]
 
     def outputs(self, t, x, u):
-        return [x[0], x[1], self.R * x[0]]
+        R = self.R
+        return [x[0], x[1], R * x[0], R * roller_acceleration(x[0], R, u[0], u[1], 0.0, self.J, self.b)]
 
 
 class DrivenRollerModel(ElementModel):
@@ -55,8 +58,10 @@ class DrivenRollerModel(ElementModel):
     ``tau0`` the motor torque at the start, carried by the shaft's initial twist.
     """
 
-    INPUTS = ("tau", "T_in", "T_out")
-    OUTPUTS = ("omega", "theta", "v", "omega_motor")
+    INPUTS = ("tau", "T_in", "T_out", "dT_in", "dT_out")
+    OUTPUTS = ("omega", "theta", "v", "omega_motor", "a")
+    EXTRAPOLATE = {"T_in": "dT_in", "T_out": "dT_out"}
+    RATE_INPUTS = ("dT_in", "dT_out")
 
     def __init__(self, R, J, b=0.0, omega0=0.0, theta0=0.0, drive=None, tau0=0.0):
         self.R, self.J, self.b, self.omega0, self.theta0 = R, J, b, omega0, theta0
@@ -74,7 +79,9 @@ class DrivenRollerModel(ElementModel):
         return [roller_acceleration(x[0], self.R, u[1], u[2], tau_el, self.J, self.b), x[0]] + dxm
 
     def outputs(self, t, x, u):
-        return [x[0], x[1], self.R * x[0], self.drive.motor_speed(x[0], x[2:])]
+        tau_el, _ = self.drive.element_torque(u[0], x[1], x[0], x[2:])
+        a = self.R * roller_acceleration(x[0], self.R, u[1], u[2], tau_el, self.J, self.b)
+        return [x[0], x[1], self.R * x[0], self.drive.motor_speed(x[0], x[2:]), a]
 
     def max_substep(self, x):
         return self.drive.max_substep(self.J)

@@ -48,9 +48,11 @@ class SpanModel(ElementModel):
 
     STATES = ("T",)
     INPUTS = ("v_in", "v_out", "T_in", "theta_up", "omega_up", "theta_down", "omega_down",
-              "L_ext", "dL_ext")
-    OUTPUTS = ("T", "L", "dL")
-    EXTRAPOLATE = {"theta_up": "omega_up", "theta_down": "omega_down"}
+              "L_ext", "dL_ext", "a_in", "a_out", "dT_in")
+    OUTPUTS = ("T", "L", "dL", "dT")
+    EXTRAPOLATE = {"theta_up": "omega_up", "theta_down": "omega_down",
+                   "v_in": "a_in", "v_out": "a_out", "T_in": "dT_in"}
+    RATE_INPUTS = ("a_in", "a_out", "dT_in")
 
     def __init__(self, EA, L0, T0, C_up=(), psi_up=(), C_down=(), psi_down=(),
                  length_mode=0, f_fixed=0.0):
@@ -99,4 +101,4 @@ class SpanModel(ElementModel):
 
     def outputs(self, t, x, u):
         L, up, dn = self.length(t, u)
-        return [x[0], L, up + dn]
+        return [x[0], L, up + dn, tension_rate(x[0], u[2], u[0], u[1], self.EA, L, up, dn)]
