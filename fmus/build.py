@@ -7,6 +7,7 @@ the sources; an up-to-date folder is not rebuilt.
 """
 import hashlib
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -75,12 +76,21 @@ def build_all(out=DEFAULT_OUT, force=False, log=print):
         for src in _bundled_sources():
             dst = bundle / src.relative_to(PACKAGE_DIR)
             shutil.copy2(src, dst)
+        staging = Path(tmp) / "fmus"
         built = {}
         for script in scripts():
             name = model_name(script)
             log(f"building {name}.fmu")
-            built[name] = Path(FmuBuilder.build_FMU(script, dest=out, project_files=[bundle]))
-    (out / MANIFEST).write_text(json.dumps({"hash": source_hash(), "fmus": sorted(built)}, indent=1))
+            fmu = Path(FmuBuilder.build_FMU(script, dest=staging, project_files=[bundle]))
+            # Built aside and renamed into place: a process reading the folder
+            # (a parallel test or sweep worker) never sees a half-written zip.
+            tmp_dst = out / f".{fmu.name}.{os.getpid()}"
+            shutil.copy2(fmu, tmp_dst)
+            os.replace(tmp_dst, out / fmu.name)
+            built[name] = out / fmu.name
+    manifest = out / f".{MANIFEST}.{os.getpid()}"
+    manifest.write_text(json.dumps({"hash": source_hash(), "fmus": sorted(built)}, indent=1))
+    os.replace(manifest, out / MANIFEST)
     return built
 
 
