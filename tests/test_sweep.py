@@ -198,7 +198,7 @@ plot: {{type: frequency_vs_rotation, y: lc9.T.f_dom, roll: unwind,
         argv = [str(sweep_file), "--out", str(out), "--scheduler", cluster.scheduler_address, "--no-progress"]
         assert sweep_cmd.main(argv) == 0, capsys.readouterr().err
         rows = read_table(out / "sweep.csv")
-        assert [r["status"] for r in rows] == ["ok", "ok"]
+        assert [r["status"] for r in rows] == ["ok", "ok"], [r["error"] for r in rows]
         assert [r["experiment.line_speed"] for r in rows] == ["150 ft/min", "250 ft/min"]
         assert rows[0]["experiment.line_speed.si"] == pytest.approx(0.762)
         R = 6.375 * 0.0254
