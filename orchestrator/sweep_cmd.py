@@ -15,7 +15,7 @@ from pathlib import Path
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="webline sweep", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="webline sweep", description="Run a parameter sweep of a line layout (grid or Monte Carlo), one process per run.", epilog="Exit codes: 0 all runs ok, 1 some run failed, 2 bad sweep file, 130 interrupted. Format: docs/sweep.md")
     ap.add_argument("sweep", type=Path, help="sweep YAML (layout + grid or monte_carlo)")
     ap.add_argument("--out", type=Path, help="output folder (default out/sweeps/<name>)")
     ap.add_argument("--scheduler", metavar="ADDRESS",

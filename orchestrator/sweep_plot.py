@@ -136,7 +136,7 @@ def plot_sweep(out, spec=None):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="webline plot-sweep", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="webline plot-sweep", description="Redraw the plot of a finished sweep (its sweep file's plot section) from OUT/sweep.csv.")
     ap.add_argument("out", type=Path, help="sweep output folder (holds sweep.csv and sweep.json)")
     args = ap.parse_args(argv)
     for name in ("sweep.json", TABLE):
