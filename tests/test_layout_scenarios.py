@@ -46,7 +46,7 @@ def test_scenario_builds_a_consistent_system(path):
     system = load_system(path)
     assert system.check() == []
     assert 0 < system.experiment.stop - system.experiment.start <= 30.0
-    assert system.experiment.step == pytest.approx(1e-3)
+    assert system.experiment.step == pytest.approx(2e-3)  # docs/performance.md: error < 0.5 % on the EWL
     json.dumps(system.meta)  # recorded with the results: must serialise
     variables = fmu_variables()
     models = {c.name: c.model for c in system.components}

@@ -52,7 +52,7 @@ def test_cascade_of_two_spans_is_analytic():
 def test_columns_and_times_match_the_master_convention():
     system = two_spans(stop=0.01)
     r = simulate_reference(system)
-    assert list(r.columns) == ["s1.T", "s1.L", "s1.dL", "s2.T", "s2.L", "s2.dL"]
+    assert list(r.columns) == ["s1.T", "s1.L", "s1.dL", "s1.dT", "s2.T", "s2.L", "s2.dL", "s2.dT"]
     assert np.allclose(r.time, np.linspace(0.0, 0.01, 11))
     assert r["s1.L"][0] == 1.0 and r["s2.L"][0] == 2.0
     system.experiment.output_interval = 0.005
@@ -94,8 +94,10 @@ def test_feed_through_chain_is_ordered():
 
 def test_schedule_evaluates_state_outputs_once_per_component():
     ref = ReferenceSystem(two_spans())
-    # no feed-through output is connected: one outputs() call per component
-    assert sorted(c for c, *_ in ref.schedule) == [0, 1]
+    # s2.dT depends on the connected T_in (a second call to record it); inside the RHS only the
+    # outputs that feed an input are computed: one outputs() call, s1's
+    assert sorted(c for c, *_ in ref.schedule) == [0, 1, 1]
+    assert len(ref.rhs_schedule) == 1
 
 
 def test_algebraic_loop_is_reported():
