@@ -184,18 +184,19 @@ def test_run_command_rejects_bad_layout_and_reports_failure(tmp_path):
 
 @pytest.mark.skipif(not _layout_ready(), reason="orchestrator/layout.py or the EWL scenario not there yet")
 def test_run_command_failure_saves_partial_results(tmp_path, capsys):
-    """Jacobi at 1 ms diverges on the EWL (see above): exit 1, message, partial results."""
+    """Jacobi at 5 ms diverges on the EWL within a fraction of a second (docs/performance.md: the
+    extrapolated coupling keeps it stable only up to about 1 ms): exit 1, message, partial results."""
     from orchestrator.results import load_results
     from orchestrator.run_cmd import main
 
     out = tmp_path / "o"
-    code = main([str(EWL), "--set", "experiment.duration=2 s", "--algorithm", "jacobi", "--out", str(out),
-                 "--no-progress"])
+    code = main([str(EWL), "--set", "experiment.duration=2 s", "--algorithm", "jacobi", "--step", "5 ms",
+                 "--out", str(out), "--no-progress"])
     err = capsys.readouterr().err
     assert code == 1
     assert "run failed" in err and "fmi2DoStep returned fmi2Discard" in err and "component '" in err
     r = load_results(out)
-    assert r.status == "failed" and 0 < len(r.time) < 2001
+    assert r.status == "failed" and 0 < len(r.time) < 401
 
 
 def test_plot_helpers_follow_the_layout_meta():
