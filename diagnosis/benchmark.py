@@ -789,6 +789,14 @@ def markdown(summary, results=None, meta=None):
                  f"{s['cases']} cases, seed {meta.get('seed')}, {meta.get('mode', 'full')} mode, "
                  f"{meta.get('jobs', 1)} parallel jobs, total wall {meta.get('wall_s', 0) / 60:.1f} min on "
                  f"{meta.get('cpus', '?')} CPUs.")
+        if results:
+            cpu = sum(r.get("cpu_s") or 0.0 for r in results)
+            gen = sum(r.get("generation_s") or 0.0 for r in results)
+            la = meta.get("load_average_end")
+            L.append(f"Diagnosis CPU time {cpu / 60:.1f} min in all, truth simulations {gen / 60:.1f} min (wall)"
+                     + (f"; load average at the end {la[0]:.1f} (a shared machine: wall times are inflated, an "
+                        f"idle machine needs about (CPU + truth) / jobs = {(cpu + gen) / 60 / max(1, meta.get('jobs', 1)):.0f} min)"
+                        if la else "") + ".")
         code = meta.get("code") or {}
         if code.get("commit"):
             L.append(f"Code: commit {code['commit']}" + (f" plus uncommitted changes in "

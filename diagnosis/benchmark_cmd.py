@@ -134,14 +134,15 @@ def _code_version(repo):
     return {"commit": None, "uncommitted": []}
 
 
-def rescore(out, log=None):
-    """(summary, results, meta) of the finished case folders in ``out``/cases."""
+def rescore(out, results_path=None):
+    """(summary, results, meta) of the finished case folders in ``out``/cases
+    (the run's meta taken from ``results_path`` or OUT/diagnosis_results.json)."""
     from diagnosis import benchmark as B
     folders = sorted(p for p in (Path(out) / "cases").glob("*") if (p / "truth" / "truth.json").exists())
     results = [B.load_case(p) for p in folders]
     summary = B.summarize(results)
     summary["generation_failures"] = []
-    old = Path(out) / "diagnosis_results.json"
+    old = Path(results_path) if results_path else Path(out) / "diagnosis_results.json"
     meta = {}
     if old.exists():
         try:
@@ -182,7 +183,7 @@ def main(argv=None):
         print("webline diagnose-bench: --cases and --jobs must be >= 1", file=sys.stderr)
         return 2
     if args.rescore:
-        summary, results, meta = rescore(args.out)
+        summary, results, meta = rescore(args.out, args.results)
     else:
         summary, results, meta = run(n, args.seed, args.out, args.quick, args.jobs, args.timeout, args.only)
     path = args.results or (args.out / "diagnosis_results.json")
