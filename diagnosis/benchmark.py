@@ -795,7 +795,7 @@ def markdown(summary, results=None, meta=None):
             la = meta.get("load_average_end")
             L.append(f"Diagnosis CPU time {cpu / 60:.1f} min in all, truth simulations {gen / 60:.1f} min (wall)"
                      + (f"; load average at the end {la[0]:.1f} (a shared machine: wall times are inflated, an "
-                        f"idle machine needs about (CPU + truth) / jobs = {(cpu + gen) / 60 / max(1, meta.get('jobs', 1)):.0f} min)"
+                        f"idle machine needs about (CPU + truth) / jobs = {(cpu + gen) / 60 / max(1, meta.get('jobs', 1)):.1f} min)"
                         if la else "") + ".")
         code = meta.get("code") or {}
         if code.get("commit"):
