@@ -51,5 +51,27 @@ def main(argv=None):
         return 1
 
 
+def exit_now(code):
+    """Flush and leave without interpreter teardown.
+
+    pythonfmu FMUs run inside this process; tearing the interpreter down
+    while their C++ slave objects still hold Python references has, on rare
+    runs, aborted the process ("corrupted double-linked list", exit 134)
+    after all work was done and saved. The result is decided by then, so
+    report it and skip the teardown.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:
+            pass
+    os._exit(code)
+
+
+def run():
+    """Console-script entry point (``webline``)."""
+    exit_now(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run()
