@@ -112,7 +112,7 @@ def n_fmus(system):
 # ---- 1 + 2: real-time factor and the share outside do_step ---------------------------
 def bench_rtf(fmu_paths, duration):
     from orchestrator.layout import load_system
-    system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"})
+    system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"} if duration else None)
     r, loop, setup, total = run(system, fmu_paths)
     sim = float(r.time[-1] - r.time[0])
     return {"scenario": "scenarios/ewl.yaml", "duration_s": sim, "step_s": system.experiment.step,
@@ -239,9 +239,9 @@ def synthetic_layout(n, duration):
     }
 
 
-def bench_scaling(fmu_paths, sizes, duration, workdir, repeats=2):
-    """Each size ``repeats`` times, in interleaved order (10, 20, .., 80, 80, .., 10), keeping the
-    fastest: load from other processes only ever slows a run down."""
+def bench_scaling(fmu_paths, sizes, duration, workdir, repeats=3):
+    """Each size ``repeats`` times, in interleaved order (10, 20, .., 80, 80, .., 10, 10, ..), keeping
+    the fastest: load from other processes only ever slows a run down."""
     import yaml
     from orchestrator.layout import load_system
     systems = {}
@@ -473,7 +473,7 @@ def run_section(name, cfg, paths, work):
     if name == "fmu_share":
         return bench_fmu_share(paths, cfg["share_duration"])
     if name == "scaling":
-        return bench_scaling(paths, cfg["scaling_sizes"], cfg["scaling_duration"], work)
+        return bench_scaling(paths, cfg["scaling_sizes"], cfg["scaling_duration"], work, cfg["scaling_repeats"])
     if name == "cosim_vs_reference":
         return bench_cosim_vs_reference(paths, cfg["compare_duration"], cfg["compare_rtols"])
     if name == "diagnose":
@@ -515,9 +515,10 @@ def main(argv=None):
     ap.add_argument("--diagnose-timeout", type=float, default=None, help="s (default: what is left of 10 min, >= 60 s)")
     args = ap.parse_args(argv)
     q = args.quick
-    cfg = {"rtf_duration": 0.5 if q else 5.0, "share_duration": 0.3 if q else 2.0,
-           "scaling_sizes": [10, 20] if q else [10, 20, 40, 80], "scaling_duration": 0.2 if q else 0.5,
-           "compare_duration": 0.3 if q else 2.0,
+    cfg = {"rtf_duration": 0.5 if q else None,  # None: the scenario's own duration
+           "share_duration": 0.3 if q else 5.0,
+           "scaling_sizes": [10, 20] if q else [10, 20, 40, 80], "scaling_duration": 0.2 if q else 2.0,
+           "scaling_repeats": 2 if q else 3, "compare_duration": 0.3 if q else 5.0,
            "compare_rtols": [1e-3, 1e-5] if q else [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8],
            "diagnose_duration": 60.0, "budget_s": 600.0, "section_timeout_s": 900.0}
     t0 = time.perf_counter()
