@@ -169,6 +169,36 @@ def tension_rate_input(name, of):
                rate_of=of)
 
 
+def roller_parameters(inertia_text):
+    """R, J, b, omega0, theta0 of an idle or driven roller ({22})."""
+    return (
+        Var("R", "m", 0.05, "Roller radius", check=positive),
+        Var("J", "kg.m2", 0.01, inertia_text, check=positive),
+        Var("b", "N.m.s/rad", 0.0, "Viscous friction coefficient", check=non_negative),
+        Var("omega0", "rad/s", 0.0, "Initial angular speed", check=finite),
+        Var("theta0", "rad", 0.0, "Initial angle", check=finite),
+    )
+
+
+def roller_tension_inputs():
+    """The tensions on both sides of a roller and their rates (for extrapolation)."""
+    return (
+        Var("T_in", "N", 0.0, "Tension of the span entering the roller (T_i)"),
+        Var("T_out", "N", 0.0, "Tension of the span leaving the roller (T_{i+1})"),
+        tension_rate_input("dT_in", "T_in"),
+        tension_rate_input("dT_out", "T_out"),
+    )
+
+
+def roller_outputs():
+    """omega, theta, v: the state outputs every roller has."""
+    return (
+        Var("omega", "rad/s", 0.0, "Angular speed of the roller"),
+        Var("theta", "rad", 0.0, "Angle of the roller"),
+        Var("v", "m/s", 0.0, "Web speed on the roller, R*omega"),
+    )
+
+
 def fourier_vars(prefix, where):
     """Parameters C[j] (m), psi[j] (rad), j = 1..N_HARMONICS, for one eccentric end."""
     out = []
