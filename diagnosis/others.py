@@ -33,7 +33,13 @@ log = logging.getLogger("webline.diagnose")
 
 MIN_Z = 50.0          # remaining residual energy / expected noise energy needed to look further
 MIN_SHARE = 0.25      # share of the remaining residual a candidate must explain
-MAX_SCREEN = 14       # screening simulations per fit run
+MAX_SCREEN = 24       # screening simulations per fit run
+# Backlash widths tried (deg). The signature of a dead zone is a transient at each
+# torque reversal whose timing and sign follow the width: a test width 30 %
+# off the true one can fit worse than no backlash at all, so one test value is
+# not enough. Steps of 25 % keep a grid point inside the basin of the true width.
+BACKLASH_GRID_DEG = (0.4, 0.5, 0.63, 0.8, 1.0, 1.25, 1.6, 2.0, 2.5, 3.1, 3.9, 4.9)
+REVERSAL = 0.02       # torque within this share of its range of zero counts as a reversal
 
 
 def _q(value, dim):
@@ -169,6 +175,31 @@ def drive_candidates(d):
     return out
 
 
+def torque_column(system, element):
+    """``component.output`` of the torque that drives ``element`` (its speed loop), or None."""
+    for k in system.connections:
+        if k.dst == element and k.dst_var == "tau":
+            return f"{k.src}.{k.src_var}"
+    return None
+
+
+def torque_reverses(d, element):
+    """(reverses, range text): does the nominal model's drive torque of ``element``
+    pass through zero after start-up in a fit run? A dead zone is crossed only then;
+    a drive held by web tension (an unwind holding back) never shows its backlash."""
+    col = torque_column(d.system0, element)
+    spans = []
+    for c in d.fit_ctx():
+        if col is None or col not in c.nominal.columns:
+            return True, "torque not recorded"
+        tau = np.asarray(c.nominal.columns[col], float)[_settle(c)]
+        lo, hi = float(tau.min()), float(tau.max())
+        spans.append((lo, hi))
+        if lo <= REVERSAL * (hi - lo) and hi >= -REVERSAL * (hi - lo):
+            return True, f"{lo:.3g} to {hi:.3g} N*m"
+    return False, ", ".join(f"{lo:.3g} to {hi:.3g} N*m" for lo, hi in spans)
+
+
 def _roll_inertia(d, c):
     p = c.parameters
     return 0.5 * math.pi * p.get("rho", 0) * p.get("width", 0) * (p.get("R0", 0) ** 4 - p.get("R_core", 0) ** 4)
@@ -300,20 +331,33 @@ def screen(d):
             el = spec[0]
             if kind == "compliance":
                 edit = (lambda doc, f, spec=spec: _drive_doc(doc, spec, f, 0.0))
-                v0, lo, hi, unit = f_t, 1.0, 40.0, "Hz"
+                grid, lo, hi, unit = [f_t], 1.0, 40.0, "Hz"
             else:
+                reverses, rng = torque_reverses(d, el)
+                if not reverses:
+                    log.info("  backlash of %s not screened: its drive torque never reverses (%s)", el, rng)
+                    d.other_log.append({"not_screened": {"element": el, "kind": "backlash",
+                                                         "why": f"drive torque never reverses ({rng})"}})
+                    continue
                 edit = (lambda doc, bl, spec=spec: _drive_doc(doc, spec, 50.0, bl))
-                v0, lo, hi, unit = math.radians(1.5), math.radians(0.1), math.radians(6.0), "rad"
-            sb = sims(edit(copy.deepcopy(doc0), v0), f"screen {el} {kind}")
-            if sb is None:
+                grid = [math.radians(x) for x in BACKLASH_GRID_DEG]
+                lo, hi, unit = math.radians(0.1), math.radians(6.0), "rad"
+            pts = []
+            for v in grid:
+                sb = sims(edit(copy.deepcopy(doc0), v), f"screen {el} {kind}" +
+                          (f" {math.degrees(v):.3g} deg" if kind == "backlash" else ""))
+                if sb is None:
+                    continue
+                rd, dd, rr = energies(sb)
+                pts.append((v, rr - 2 * rd + dd))
+            if not pts:
                 continue
-            rd, dd, rr = energies(sb)
-            J1 = rr - 2 * rd + dd
+            v0, J1 = min(pts, key=lambda p: p[1])
             share = 1.0 - J1 / rr if rr > 0 else 0.0
-            second = 0.8 * v0
+            second = 0.8 * v0 if len(pts) == 1 else None
             results.append({"kind": kind, "element": el, "share": max(share, 0.0), "value": v0,
                             "apply": (lambda doc, edit=edit, v=v0: edit(doc, v)),
-                            "line": {"edit": edit, "points": [(v0, J1)], "second": second,
+                            "line": {"edit": edit, "points": pts, "second": second,
                                      "lo": lo, "hi": hi, "rr": rr, "unit": unit, "J": spec[1]},
                             "parameters": {}, "fundamental_hz": v0 if kind == "compliance" else None,
                             "detail": f"{el} {kind} " + (f"f_t {v0:.3g} Hz" if kind == "compliance"
@@ -356,8 +400,14 @@ def _line_search(b, sims, energies, doc0, iterations=5):
     energy at the evaluated values, minimised, simulated; the best value seen is kept."""
     L = b["line"]
     pts = list(L["points"])
-    v = L.get("second", b["value"])
+    # linear candidates start at their projected value, drives at their second test
+    # value or, after a grid, at the parabola through the best grid points
+    v = L["second"] if "second" in L else b["value"]
+    if v is None:
+        v = _next_point(pts, L["lo"], L["hi"])
     for _ in range(iterations):
+        if v is None or (pts and min(abs(v - p[0]) for p in pts) < 0.01 * max(abs(v), 1e-6)):
+            break
         sb = sims(L["edit"](copy.deepcopy(doc0), v), f"refine {b['element']} = {v:.4g}")
         if sb is None:
             break
