@@ -1,0 +1,62 @@
+"""Backlash in the speed master's drive, found blind.
+
+A dead zone shows only where the drive torque passes through zero: on the
+benchmark line the speed master (sw_leader) sits between two tension zones and
+its torque reverses during a 20 % speed ramp, while the unwind and rewind are
+held by web tension and never cross their dead zone. The diagnosis must find
+the sw_leader's backlash, estimate its width, and say that the tension-held
+drives were not screened for it (their backlash would be invisible).
+
+The transient of a dead zone depends sharply on its width (a test width 30 %
+off fits worse than none), which is why the screening runs over a grid.
+Built and scored by the benchmark's own code (truth simulated by the master,
+diagnosis run blind in a subprocess).
+"""
+import math
+
+import numpy as np
+import pytest
+
+from diagnosis import benchmark as B
+
+BACKLASH_DEG = 1.8
+
+
+@pytest.fixture(scope="module")
+def case_result(tmp_path_factory, fmus):
+    root = tmp_path_factory.mktemp("backlash")
+    line = B.derive_line()
+    effect = B.draw_drive(np.random.default_rng(5), "backlash", "sw_leader", line)
+    effect.drive["backlash"] = math.radians(BACKLASH_DEG)
+    case = B.Case(id="bl", category="backlash", effects=[effect],
+                  runs=[B.RunSpec("run1", speed_fpm=220.0, duration_s=8.0, profile="speed_ramp",
+                                  noise_N=0.05, seed=3)])
+    res = B.evaluate_case(case, root, line, fmus, timeout=900, extra=["--jobs", "1"])
+    assert res["report"] is not None, res.get("stderr") or res.get("generation_error")
+    return res
+
+
+def test_the_torque_reverses_only_at_the_speed_master(case_result):
+    torque = case_result["truth"]["runs"][0]["drive_torque"]
+    assert torque["sw_leader"]["min_Nm"] < 0.0 < torque["sw_leader"]["max_Nm"], torque
+    for held in ("unwind", "rewind"):
+        lo, hi = torque[held]["min_Nm"], torque[held]["max_Nm"]
+        assert lo * hi > 0.0, (held, lo, hi)
+
+
+def test_backlash_is_found_with_its_width(case_result):
+    score = case_result["score"]
+    assert score["missed"] == [] and score["false"] == [], (score, case_result["report"]["verdict"])
+    eff = case_result["report"]["effects"][0]
+    assert (eff["element"], eff["kind"]) == ("sw_leader", "backlash")
+    width = eff["parameters"]["backlash"]["estimated"]
+    assert abs(math.degrees(width) - BACKLASH_DEG) < 0.25 * BACKLASH_DEG, math.degrees(width)
+    gap = case_result["gap"]
+    assert gap["in_sample"]["ratio"] < 0.5, gap
+
+
+def test_tension_held_drives_are_not_screened_for_backlash(case_result):
+    other = case_result["report"]["screening"]["other"]
+    skipped = {x["not_screened"]["element"] for x in other if "not_screened" in x}
+    assert {"unwind", "rewind"} <= skipped, other
+    assert "sw_leader" not in skipped
