@@ -338,6 +338,8 @@ def screen(d):
                     log.info("  backlash of %s not screened: its drive torque never reverses (%s)", el, rng)
                     d.other_log.append({"not_screened": {"element": el, "kind": "backlash",
                                                          "why": f"drive torque never reverses ({rng})"}})
+                    d.notes.append(f"backlash of {el} cannot be seen in these runs: its drive torque never "
+                                   f"reverses ({rng}); a run that reverses it would test it")
                     continue
                 edit = (lambda doc, bl, spec=spec: _drive_doc(doc, spec, 50.0, bl))
                 grid = [math.radians(x) for x in BACKLASH_GRID_DEG]
