@@ -431,42 +431,39 @@ def _f(x, fmt="{:.3g}"):
     return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
 
 
+def _section(res, key, label, add):
+    """A section's results for the table, or None after a line saying it was skipped or failed."""
+    x = res.get(key, {})
+    if x.get("status") == "skipped":
+        add(f"{key}: skipped")
+        return None
+    if "error" in x:
+        add(f"{label}: ERROR {x['error']}")
+        return None
+    return x or None
+
+
 def table(res):
     m = res["machine"]
     lines = [f"webline bench  {m['date']}  commit {m['git_commit']}",
              f"machine: {m['cpu_model']}, {m['logical_cores']} logical / {m['physical_cores']} physical cores, "
              f"Python {m['python']}", ""]
     add = lines.append
-    r = res.get("rtf", {})
-    if r.get("status") == "skipped":
-        add("rtf: skipped")
-        r = {}
-    if "error" in r:
-        add(f"real-time factor: ERROR {r['error']}")
-    elif r:
+    r = _section(res, "rtf", "real-time factor", add)
+    if r:
         add(f"real-time factor, ewl.yaml ({r['n_fmus']} FMUs, step {r['step_s'] * 1e3:g} ms, {r['algorithm']}, "
             f"{r['duration_s']:g} s): {r['rtf']:.3f}  ({r['us_per_macro_step']:.0f} us/macro step, "
             f"{r['us_per_fmu_step']:.1f} us per FMU step; setup {r['setup_wall_s']:.2f} s)")
-    s = res.get("fmu_share", {})
-    if s.get("status") == "skipped":
-        add("fmu_share: skipped")
-        s = {}
-    if "error" in s:
-        add(f"share outside do_step: ERROR {s['error']}")
-    elif s:
+    s = _section(res, "fmu_share", "share outside do_step", add)
+    if s:
         add(f"outside the FMUs' do_step: {100 * s['share_outside_do_step']:.1f} % of the master loop "
             f"({s['us_per_do_step']:.1f} us per do_step)")
         add(f"   loop split: do_step {100 * s['share_in_do_step']:.1f} %, FMI get/set in the slaves' Python "
             f"{100 * s['share_in_get_set_python']:.1f} % (feed-through refresh "
             f"{100 * s['share_of_which_feedthrough_refresh']:.1f} %), master + ctypes + pythonfmu C + recording "
             f"{100 * s['share_outside_fmu_python']:.1f} %")
-    st = res.get("step_sweep", {})
-    if st.get("status") == "skipped":
-        add("step_sweep: skipped")
-        st = {}
-    if "error" in st:
-        add(f"step sweep: ERROR {st['error']}")
-    elif st:
+    st = _section(res, "step_sweep", "step sweep", add)
+    if st:
         add("")
         add(f"macro step vs error and speed ({st['duration_s']:g} s of ewl_out_of_round, {st['algorithm']}, "
             f"error target {100 * st['error_target']:g} %):")
@@ -478,13 +475,8 @@ def table(res):
         b = st.get("fastest_within_target")
         add(f"   fastest within the target: {b['step_s'] * 1e3:g} ms, {b['rtf']:.2f}x real time" if b
             else "   no step within the target")
-    sc = res.get("scaling", {})
-    if sc.get("status") == "skipped":
-        add("scaling: skipped")
-        sc = {}
-    if "error" in sc:
-        add(f"scaling: ERROR {sc['error']}")
-    elif sc:
+    sc = _section(res, "scaling", "scaling", add)
+    if sc:
         add("")
         add(f"{'elements':>8} {'FMUs':>5} {'wall s / sim s':>15} {'RTF':>7} {'us/FMU step':>12}")
         for row in sc["rows"]:
@@ -495,13 +487,8 @@ def table(res):
             f"doubling ratios {', '.join(f'{x:.2f}' for x in sc['doubling_ratios'])}; fit "
             f"{lf['s_per_element_per_sim_s'] * 1e3:.1f} ms/element + {lf['intercept_s'] * 1e3:.0f} ms per sim s, "
             f"max residual {100 * lf['max_rel_residual']:.1f} %")
-    c = res.get("cosim_vs_reference", {})
-    if c.get("status") == "skipped":
-        add("cosim_vs_reference: skipped")
-        c = {}
-    if "error" in c:
-        add(f"co-sim vs reference: ERROR {c['error']}")
-    elif c:
+    c = _section(res, "cosim_vs_reference", "co-sim vs reference", add)
+    if c:
         add("")
         cs = c["cosim"]
         add(f"co-sim vs monolithic reference ({c['duration_s']:g} s of ewl_out_of_round): co-sim "

@@ -569,15 +569,7 @@ class Diagnosis:
                      r["cand"].element, 100 * (1 - mis), ", ".join(x["cand"].element for x in chosen[:-1]))
         if len(chosen) < 2:
             return
-        # joint least squares per order over the chosen elements
-        for j in range(M.shape[1]):
-            cols = [r for r in chosen if abs(r["X"][j]) > 0]
-            if not cols:
-                continue
-            A = np.column_stack([r["G"][:, j] for r in cols]) * np.sqrt(W)[:, None]
-            x, *_ = np.linalg.lstsq(A, M[:, j] * np.sqrt(W), rcond=None)
-            for r, xj in zip(cols, x):
-                r["X"][j] = xj
+        _joint_solve(chosen, M, W)
         frac = [float(np.sum(W[:, None] * np.abs(r["G"] * r["X"][None, :]) ** 2)) for r in chosen]
         for r, fr in zip(chosen, frac):
             r["share"] = ranked[0]["score"]["share"] * fr / max(sum(frac), 1e-300)
@@ -736,14 +728,7 @@ class Diagnosis:
                 Mp, W = left[gid], members[0]["W"]
                 if Mp is None or Mp.shape != members[0]["M"].shape:
                     continue
-                for j in range(Mp.shape[1]):
-                    cols = [b for b in members if abs(b["X"][j]) > 0]
-                    if not cols:
-                        continue
-                    A = np.column_stack([b["G"][:, j] for b in cols]) * np.sqrt(W)[:, None]
-                    dx, *_ = np.linalg.lstsq(A, Mp[:, j] * np.sqrt(W), rcond=None)
-                    for b, d in zip(cols, dx):
-                        b["X"][j] = b["X"][j] + d
+                _joint_solve(members, Mp, W, correct=True)
 
     def _harmonics_left(self, k, fit, sims):
         """Harmonics [(run, sensor), order] of data minus simulation on ``k``'s angle."""
@@ -769,6 +754,22 @@ class Diagnosis:
 
 
 # ================================================================== helpers ====
+def _joint_solve(members, M, W, correct=False):
+    """Weighted least squares per order over elements turning at one frequency:
+    M[:, j] = sum_e G_e[:, j] X_e[j] over (run, sensor) rows, for the orders each
+    element carries (X_e[j] != 0). ``correct``: M is what the current estimates
+    leave, and the solution is added to them (a Gauss-Newton step)."""
+    sw = np.sqrt(W)[:, None]
+    for j in range(M.shape[1]):
+        cols = [b for b in members if abs(b["X"][j]) > 0]
+        if not cols:
+            continue
+        A = np.column_stack([b["G"][:, j] for b in cols]) * sw
+        x, *_ = np.linalg.lstsq(A, M[:, j] * sw[:, 0], rcond=None)
+        for b, xj in zip(cols, x):
+            b["X"][j] = b["X"][j] + xj if correct else xj
+
+
 def _rms(x):
     x = np.asarray(x, float)
     return float(np.sqrt(np.mean(x ** 2))) if x.size else 0.0
