@@ -340,9 +340,9 @@ def bench_step_sweep(fmu_paths, duration, steps, repeats=2):
     measured on the same runs. Each system is built at its own step (the FMUs' RK4
     sub-step is the macro step, as a user running ``--step`` gets); steps interleaved
     ``repeats`` times, the fastest loop kept (others' load only slows a run down)."""
+    import numpy as np
     from orchestrator.accuracy import load_cells, relative_rms, without_noise
     from orchestrator.layout import load_system
-    import numpy as np
     from orchestrator.reference import solve_reference
     over = {"experiment.duration": f"{duration} s"}
     base = without_noise(load_system(SCEN / "ewl_out_of_round.yaml", over))

@@ -188,9 +188,11 @@ def torque_reverses(d, element):
     pass through zero after start-up in a fit run? A dead zone is crossed only then;
     a drive held by web tension (an unwind holding back) never shows its backlash."""
     col = torque_column(d.system0, element)
+    if col is None:
+        return True, "torque not recorded"
     spans = []
     for c in d.fit_ctx():
-        if col is None or col not in c.nominal.columns:
+        if col not in c.nominal.columns:
             return True, "torque not recorded"
         tau = np.asarray(c.nominal.columns[col], float)[_settle(c)]
         lo, hi = float(tau.min()), float(tau.max())
@@ -418,10 +420,7 @@ def _line_search(b, sims, energies, doc0, iterations=5):
         ys = [p[1] for p in pts]
         if len(pts) >= 2 and max(ys) - min(ys) < 1e-3 * max(ys):
             break  # the residual does not depend on this value: keep the screened one
-        v_new = _next_point(pts, L["lo"], L["hi"])
-        if v_new is None or min(abs(v_new - p[0]) for p in pts) < 0.01 * max(abs(v_new), 1e-6):
-            break
-        v = v_new
+        v = _next_point(pts, L["lo"], L["hi"])  # None or a value already tried ends the loop above
     log.info("  line search %s: %s", b["element"], ", ".join(f"{x:.4g}: {y:.4g}" for x, y in pts))
     best_v, best_J = min(pts, key=lambda p: p[1])
     b["value"] = best_v
