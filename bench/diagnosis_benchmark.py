@@ -15,7 +15,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from diagnosis import benchmark_cmd  # noqa: E402
+from webline.diagnosis import benchmark_cmd  # noqa: E402
 
 
 def main(argv=None):

@@ -90,13 +90,13 @@ def machine_info():
 
 # ---- helpers ------------------------------------------------------------------------
 def fmus():
-    from fmus.build import build_all
+    from webline.fmus.build import build_all
     return build_all(log=lambda m: print(f"  {m}", file=sys.stderr))
 
 
 def run(system, fmu_paths):
     """simulate(); (result, loop wall s, setup wall s, total wall s)."""
-    from orchestrator.master import simulate
+    from webline.orchestrator.master import simulate
     t = time.perf_counter()
     r = simulate(system, fmu_paths=fmu_paths, progress=False)
     total = time.perf_counter() - t
@@ -111,7 +111,7 @@ def n_fmus(system):
 
 # ---- 1 + 2: real-time factor and the share outside do_step ---------------------------
 def bench_rtf(fmu_paths, duration):
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"} if duration else None)
     r, loop, setup, total = run(system, fmu_paths)
     sim = float(r.time[-1] - r.time[0])
@@ -172,7 +172,7 @@ class DoStepTimer:
 
 
 def bench_fmu_share(fmu_paths, duration):
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"})
     with DoStepTimer() as timer:
         r, loop, _, _ = run(system, fmu_paths)
@@ -243,7 +243,7 @@ def bench_scaling(fmu_paths, sizes, duration, workdir, repeats=3):
     """Each size ``repeats`` times, in interleaved order (10, 20, .., 80, 80, .., 10, 10, ..), keeping
     the fastest: load from other processes only ever slows a run down."""
     import yaml
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     systems = {}
     for n in sizes:
         path = Path(workdir) / f"synthetic_{n}.yaml"
@@ -288,9 +288,9 @@ def bench_scaling(fmu_paths, sizes, duration, workdir, repeats=3):
 
 # ---- 4: co-simulation vs monolithic reference at equal accuracy ----------------------
 def bench_cosim_vs_reference(fmu_paths, duration, rtols):
-    from orchestrator.accuracy import load_cells, relative_rms, without_noise
-    from orchestrator.layout import load_system
-    from orchestrator.reference import simulate_reference
+    from webline.orchestrator.accuracy import load_cells, relative_rms, without_noise
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.reference import simulate_reference
     system = without_noise(load_system(SCEN / "ewl_out_of_round.yaml",
                                        {"experiment.duration": f"{duration} s"}))
     cols = load_cells(system)
@@ -341,9 +341,9 @@ def bench_step_sweep(fmu_paths, duration, steps, repeats=2):
     sub-step is the macro step, as a user running ``--step`` gets); steps interleaved
     ``repeats`` times, the fastest loop kept (others' load only slows a run down)."""
     import numpy as np
-    from orchestrator.accuracy import load_cells, relative_rms, without_noise
-    from orchestrator.layout import load_system
-    from orchestrator.reference import solve_reference
+    from webline.orchestrator.accuracy import load_cells, relative_rms, without_noise
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.reference import solve_reference
     over = {"experiment.duration": f"{duration} s"}
     base = without_noise(load_system(SCEN / "ewl_out_of_round.yaml", over))
     cols = load_cells(base)
@@ -387,7 +387,7 @@ def bench_diagnose(fmu_paths, duration, timeout, workdir):
     if "diagnose" not in COMMANDS:
         return {"status": "not available", "reason": "no 'webline diagnose' command in webline/cli.py"}
     import numpy as np
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     work = Path(workdir) / "diagnose"
     work.mkdir(parents=True, exist_ok=True)
     # the "measured" run: the out-of-round EWL, recorded every 5 ms
@@ -555,7 +555,7 @@ def snapshot_fmus(work):
     """Copy the built FMUs into the bench's folder: a rebuild by someone else during the
     bench cannot change (or truncate) what is being measured."""
     import shutil
-    from fmus.build import source_hash
+    from webline.fmus.build import source_hash
     built = fmus()
     dst = Path(work) / "fmus"
     dst.mkdir()

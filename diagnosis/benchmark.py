@@ -119,7 +119,7 @@ def line_facts(layout_path):
 
     Zones are the runs between consecutive driven elements; an element in
     between belongs to the zone, a driven element to none (it bounds two)."""
-    from orchestrator.layout import load_layout
+    from webline.orchestrator.layout import load_layout
     L = load_layout(layout_path)
     facts, zone = {}, -1
     for e in L.path:
@@ -206,7 +206,7 @@ def draw_periodic(rng, facts, element, amp_range=(0.05 * MM, 1.0 * MM)):
 
 
 def _element_inertia(layout_doc, element):
-    from orchestrator.units import quantity
+    from webline.orchestrator.units import quantity
     e = next(x for x in layout_doc["path"] if x["name"] == element)
     if "core_inertia" in e:
         return quantity(e["core_inertia"], "inertia"), "core_inertia"
@@ -337,7 +337,7 @@ def fmt_len(x):
 
 def truth_set(case, layout_doc):
     """The layout ``set`` block that adds the case's effects to the nominal line."""
-    from orchestrator.units import quantity
+    from webline.orchestrator.units import quantity
     s = {}
     for e in case.effects:
         if e.kind in PERIODIC:
@@ -376,16 +376,16 @@ def run_conditions(run):
 
 def _overrides(exp):
     """Run-file experiment block -> dotted overrides, as ``diagnosis.runs`` reads them."""
-    from diagnosis.runs import _experiment_overrides
+    from webline.diagnosis.runs import _experiment_overrides
     return _experiment_overrides(exp, "<run>", {})
 
 
 def make_case(case, folder, line_doc, fmu_paths=None):
     """Write the case (blind/ and truth/ folders), simulating the truth layout for
     every run. Returns the truth record (also in truth/truth.json)."""
-    from orchestrator.layout import load_system
-    from orchestrator.master import simulate
-    from diagnosis.synthetic import pulse_train
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.master import simulate
+    from webline.diagnosis.synthetic import pulse_train
     folder = Path(folder)
     blind, truth_dir = folder / "blind", folder / "truth"
     line = write_yaml(blind / "line.yaml", line_doc, "# nominal line of the diagnosis benchmark\n")

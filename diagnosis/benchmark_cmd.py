@@ -46,7 +46,7 @@ def parser():
 
 def _worker(args):
     case, root, line_doc, fmu_paths, timeout, extra = args
-    from diagnosis import benchmark as B
+    from webline.diagnosis import benchmark as B
     t0 = time.perf_counter()
     res = B.evaluate_case(case, root, line_doc, fmu_paths, timeout=timeout, extra=extra)
     res["case_wall_s"] = time.perf_counter() - t0
@@ -55,8 +55,8 @@ def _worker(args):
 
 def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=1800.0, only=None, log=None):
     """Run the benchmark; returns (summary, results, meta)."""
-    from diagnosis import benchmark as B
-    from fmus.build import build_all
+    from webline.diagnosis import benchmark as B
+    from webline.fmus.build import build_all
     log = log or (lambda m: print(m, file=sys.stderr, flush=True))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -110,7 +110,7 @@ def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=
 
 def _diagnose_has_option(opt):
     try:
-        from diagnosis import diagnose_cmd
+        from webline.diagnosis import diagnose_cmd
         return any(opt in a.option_strings for a in diagnose_cmd.parser()._actions)
     except Exception:
         return False
@@ -137,7 +137,7 @@ def _code_version(repo):
 def rescore(out, results_path=None):
     """(summary, results, meta) of the finished case folders in ``out``/cases
     (the run's meta taken from ``results_path`` or OUT/diagnosis_results.json)."""
-    from diagnosis import benchmark as B
+    from webline.diagnosis import benchmark as B
     folders = sorted(p for p in (Path(out) / "cases").glob("*") if (p / "truth" / "truth.json").exists())
     results = [B.load_case(p) for p in folders]
     summary = B.summarize(results)
@@ -154,7 +154,7 @@ def rescore(out, results_path=None):
 
 
 def write(summary, results, meta, path):
-    from diagnosis import benchmark as B
+    from webline.diagnosis import benchmark as B
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     doc = {"schema": "webline-diagnose-bench-1", "meta": meta, "summary": summary,

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator import units as web_units
+from webline.orchestrator import units as web_units
 
 TIME_NAMES = ("time", "t")
 """Accepted names of the time column / variable (case-insensitive), in order of preference."""

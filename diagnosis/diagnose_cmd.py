@@ -36,8 +36,8 @@ def parser():
 
 def main(argv=None):
     args = parser().parse_args(argv)
-    from diagnosis.pipeline import DiagnoseError, Options, diagnose
-    from diagnosis.line_model import SimulationFailed
+    from webline.diagnosis.pipeline import DiagnoseError, Options, diagnose
+    from webline.diagnosis.line_model import SimulationFailed
 
     logging.basicConfig(level=logging.WARNING if args.quiet else logging.INFO,
                         format="%(asctime)s %(message)s", datefmt="%H:%M:%S", stream=sys.stderr)

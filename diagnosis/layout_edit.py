@@ -23,7 +23,7 @@ def base_doc(layout_path):
 
 
 def _plain_base(doc):
-    from orchestrator.layout_source import load_located, plain
+    from webline.orchestrator.layout_source import load_located, plain
     return plain(load_located(Path(doc["base"])))
 
 
@@ -37,7 +37,7 @@ def element_entry(doc, element):
 
 def current_fourier(doc, element, n):
     """Complex coefficients X_j = C_j exp(i psi_j) of ``element`` in ``doc`` (base + set), length n."""
-    from orchestrator.units import quantity
+    from webline.orchestrator.units import quantity
     s = doc.get("set", {})
     kC, kp = f"path.{element}.eccentricity.C", f"path.{element}.eccentricity.psi"
     if kC in s:

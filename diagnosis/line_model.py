@@ -42,7 +42,7 @@ class Sim:
 
 class LineModel:
     def __init__(self, layout_path, fmu_paths=None, progress=False, jobs=1):
-        from diagnosis import layout_edit
+        from webline.diagnosis import layout_edit
         self.path = Path(layout_path)
         if not self.path.is_file():
             raise FileNotFoundError(f"{self.path}: layout not found")
@@ -59,14 +59,14 @@ class LineModel:
     @property
     def fmu_paths(self):
         if self._fmu_paths is None:
-            from fmus.build import build_all
+            from webline.fmus.build import build_all
             self._fmu_paths = build_all(log=lambda m: log.info(m))
         return self._fmu_paths
 
     # ---------------------------------------------------------------- systems ----
     def system(self, run, doc=None, edits=()):
         """System of the layout (or of the derived layout ``doc``) under ``run``'s conditions."""
-        from orchestrator.layout import load_system
+        from webline.orchestrator.layout import load_system
         overrides = dict(run.overrides) if run is not None else {}
         if doc is None or not doc.get("set"):
             system = load_system(self.path, overrides or None)
@@ -90,7 +90,7 @@ class LineModel:
     def write_doc(self, doc, path=None):
         """Write a derived layout; to a temporary file unless ``path`` is given
         (then its ``base`` is made relative to the file's folder)."""
-        from diagnosis import layout_edit
+        from webline.diagnosis import layout_edit
         if path is None:
             if self._tmp is None:
                 self._tmp = tempfile.TemporaryDirectory(prefix="webline_diagnose_")
@@ -116,7 +116,7 @@ class LineModel:
 
     # ------------------------------------------------------------- simulate ----
     def simulate(self, run, doc=None, edits=(), label=""):
-        from orchestrator.master import simulate
+        from webline.orchestrator.master import simulate
         system = self.system(run, doc, edits)
         t0 = _time.perf_counter()
         result = simulate(system, fmu_paths=self.fmu_paths, progress=self.progress)

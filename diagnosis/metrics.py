@@ -18,7 +18,7 @@ import numpy as np
 import scipy.ndimage
 import scipy.signal
 
-from diagnosis.spectra import (amplitude_spectrum, frequency_resolution, interpolate_peak,
+from webline.diagnosis.spectra import (amplitude_spectrum, frequency_resolution, interpolate_peak,
                                spectral_peaks)
 
 

@@ -16,7 +16,7 @@ and model yhat (error e = y - yhat):
 """
 import numpy as np
 
-from diagnosis import metrics
+from webline.diagnosis import metrics
 
 
 def gap_metrics(t, y, yhat, fs, mask=None, n_peaks=5):

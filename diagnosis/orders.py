@@ -30,7 +30,7 @@ import scipy.ndimage
 import scipy.optimize
 from numpy.polynomial import legendre
 
-from diagnosis.spectra import amplitude_spectrum
+from webline.diagnosis.spectra import amplitude_spectrum
 
 TACH_KINDS = ("angle", "pulse", "speed")
 TWO_PI = 2.0 * np.pi

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from diagnosis import orders as od
-from diagnosis import spectra as sp
-from diagnosis.data import DataError, load
+from webline.diagnosis import orders as od
+from webline.diagnosis import spectra as sp
+from webline.diagnosis.data import DataError, load
 
 KINDS = ("auto", "pulse", "angle", "speed", "model")
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")

@@ -24,10 +24,10 @@ import math
 
 import numpy as np
 
-from diagnosis import candidates as cand_mod
-from diagnosis import estimate as est
-from diagnosis import layout_edit
-from diagnosis.line_model import SimulationFailed
+from webline.diagnosis import candidates as cand_mod
+from webline.diagnosis import estimate as est
+from webline.diagnosis import layout_edit
+from webline.diagnosis.line_model import SimulationFailed
 
 log = logging.getLogger("webline.diagnose")
 
@@ -43,7 +43,7 @@ REVERSAL = 0.02       # torque within this share of its range of zero counts as 
 
 
 def _q(value, dim):
-    from orchestrator.units import quantity
+    from webline.orchestrator.units import quantity
     return quantity(value, dim)
 
 
@@ -62,7 +62,7 @@ def _settle(c):
 
 def significance(d, rem):
     """(z of the slow part, z of the whole remaining residual, unexplained peak frequencies)."""
-    from diagnosis import spectra
+    from webline.diagnosis import spectra
     z_slow = z_all = 0.0
     n_rs = 0
     peaks = []

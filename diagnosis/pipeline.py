@@ -37,11 +37,11 @@ from pathlib import Path
 
 import numpy as np
 
-from diagnosis import candidates as cand_mod
-from diagnosis import estimate as est
-from diagnosis import layout_edit
-from diagnosis.line_model import LineModel, SimulationFailed
-from diagnosis.runs import RunError, load_run
+from webline.diagnosis import candidates as cand_mod
+from webline.diagnosis import estimate as est
+from webline.diagnosis import layout_edit
+from webline.diagnosis.line_model import LineModel, SimulationFailed
+from webline.diagnosis.runs import RunError, load_run
 
 log = logging.getLogger("webline.diagnose")
 
@@ -142,10 +142,10 @@ class Diagnosis:
 
     # ---------------------------------------------------------------- 1 runs ----
     def load(self):
-        from orchestrator.layout import LayoutError
+        from webline.orchestrator.layout import LayoutError
         if not self.layout_path.exists():
             raise DiagnoseError(f"{self.layout_path}: layout not found")
-        from orchestrator.layout import load_system
+        from webline.orchestrator.layout import load_system
         try:
             load_system(self.layout_path)
         except LayoutError as exc:
@@ -234,7 +234,7 @@ class Diagnosis:
     def _angle(self, c, k):
         """Angle of candidate ``k`` in run ``c``: from the data if it has one, else the model's."""
         run = c.run
-        from diagnosis import orders
+        from webline.diagnosis import orders
         for name in (k.element, k.component):
             if f"{name}.angle" in run.columns:
                 return orders.angle_from_encoder(run.columns[f"{name}.angle"]), "data angle"
@@ -264,7 +264,7 @@ class Diagnosis:
 
     # --------------------------------------------------------------- 3 where ----
     def where(self):
-        from diagnosis import spectra
+        from webline.diagnosis import spectra
         self.where_report = {}
         for c in self.ctx:
             fams = {k.element: c.freq[k.key] for k in self.cands if c.freq[k.key] > 0}
@@ -642,7 +642,7 @@ class Diagnosis:
     # ------------------------------------------------------- 6 other effects ----
     def other_effects(self):
         try:
-            from diagnosis import others
+            from webline.diagnosis import others
         except ImportError:
             self.other = []
             return
@@ -651,7 +651,7 @@ class Diagnosis:
     # -------------------------------------------------------------- 7 refine ----
     def refine(self):
         """Add the effects one by one to the layout, re-simulate, measure the gap."""
-        from diagnosis import metrics_ext as mx
+        from webline.diagnosis import metrics_ext as mx
         self.steps = []
         doc = self.model.copy_doc()
         self.steps.append({"added": None, "sims": {c.name: c.nominal for c in self.ctx}})
@@ -749,7 +749,7 @@ class Diagnosis:
 
     # -------------------------------------------------------------- 8 report ----
     def report(self):
-        from diagnosis import report as rep
+        from webline.diagnosis import report as rep
         return rep.build(self)
 
 

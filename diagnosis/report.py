@@ -218,7 +218,7 @@ def _drop(o):
 def _remaining(d):
     """Peaks left in the refined residual, tagged, and whether each stays at the
     same frequency across runs (not a shaft whose speed or radius changed) or moves."""
-    from diagnosis import spectra
+    from webline.diagnosis import spectra
     last = d.steps[-1]
     out = {}
     for c in d.ctx:
@@ -226,7 +226,7 @@ def _remaining(d):
         fams = {k.element: c.freq[k.key] for k in d.cands if c.freq[k.key] > 0}
         out[c.name] = {}
         for s in c.sensors:
-            from diagnosis.estimate import split_slow_periodic
+            from webline.diagnosis.estimate import split_slow_periodic
             r = split_slow_periodic(c.meas[s] - sim.columns[s], c.fs, c.fc)[1][c.mask]
             f, a = spectra.amplitude_spectrum(r, c.fs)
             pk = spectra.spectral_peaks(f, a, fmin=max(c.fc, 2 * c.fs / len(r)))
@@ -340,8 +340,8 @@ def html_report(d, rep):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from diagnosis import spectra
-    from diagnosis.estimate import split_slow_periodic
+    from webline.diagnosis import spectra
+    from webline.diagnosis.estimate import split_slow_periodic
 
     e = html.escape
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>webline diagnose</title>"

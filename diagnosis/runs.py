@@ -199,7 +199,7 @@ def read_data(path):
 def _load_with_data_module(path):
     """Load through diagnosis.data if it is there, else a plain CSV reader."""
     try:
-        from diagnosis import data as data_mod
+        from webline.diagnosis import data as data_mod
     except ImportError:
         data_mod = None
     if data_mod is not None:

@@ -9,7 +9,7 @@ pulse on the unwind and a speed signal on the idle roller.
 """
 import numpy as np
 
-from diagnosis.data import Record
+from webline.diagnosis.data import Record
 
 FPM = 0.00508  # m/s per ft/min
 INCH = 0.0254  # m

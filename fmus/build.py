@@ -13,9 +13,24 @@ import sys
 import tempfile
 from pathlib import Path
 
+import webline
+
 FMU_DIR = Path(__file__).resolve().parent
-PACKAGE_DIR = FMU_DIR.parent / "webline"
-DEFAULT_OUT = FMU_DIR.parent / "build" / "fmus"
+PACKAGE_DIR = Path(webline.__file__).resolve().parent
+
+
+def _default_out():
+    """``build/fmus`` of a source checkout; an installed webline builds into the user's cache
+    (``$WEBLINE_FMU_DIR``, else ``$XDG_CACHE_HOME/webline/fmus-<version>``), never into site-packages."""
+    if os.environ.get("WEBLINE_FMU_DIR"):
+        return Path(os.environ["WEBLINE_FMU_DIR"])
+    if (FMU_DIR.parent / "pyproject.toml").is_file():
+        return FMU_DIR.parent / "build" / "fmus"
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return cache / "webline" / f"fmus-{webline.__version__}"
+
+
+DEFAULT_OUT = _default_out()
 MANIFEST = "manifest.json"
 
 

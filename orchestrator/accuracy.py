@@ -51,7 +51,7 @@ def without_noise(system):
 
 def master_times(experiment, step):
     """Output times of the master for ``experiment`` run at macro step ``step``."""
-    from orchestrator.reference import output_times
+    from webline.orchestrator.reference import output_times
     return output_times(experiment, step)
 
 
@@ -77,11 +77,11 @@ def measure(system, steps=DEFAULT_STEPS, algorithms=DEFAULT_ALGORITHMS, columns=
     "algorithm", "status", "wall_s", "rel_rms": {col: x}, "max_abs": {col: x},
     "worst"}]}``.
     """
-    from orchestrator.reference import solve_reference
+    from webline.orchestrator.reference import solve_reference
     log = log or (lambda *a: None)
     if simulate is None:
         from functools import partial
-        from orchestrator.master import simulate as master_simulate
+        from webline.orchestrator.master import simulate as master_simulate
         simulate = partial(master_simulate, progress=False)
     base = system if keep_noise else without_noise(system)
     columns = list(columns) if columns else load_cells(base)

@@ -6,7 +6,7 @@ import re
 import sys
 from pathlib import Path
 
-from orchestrator.accuracy import DEFAULT_ALGORITHMS, DEFAULT_STEPS, json_ready, markdown_table, measure
+from webline.orchestrator.accuracy import DEFAULT_ALGORITHMS, DEFAULT_STEPS, json_ready, markdown_table, measure
 
 _UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 
@@ -45,8 +45,8 @@ def main(argv=None):
     if bad:
         ap.error(f"unknown algorithm(s) {', '.join(bad)}; choose from {', '.join(DEFAULT_ALGORITHMS)}")
     try:
-        from orchestrator.layout import load_system
-        from orchestrator.ssp_cmd import _overrides
+        from webline.orchestrator.layout import load_system
+        from webline.orchestrator.ssp_cmd import _overrides
         system = load_system(args.layout, _overrides(args.set))
     except (OSError, ValueError, KeyError) as e:
         print(f"webline accuracy: {args.layout}: {e}", file=sys.stderr)

@@ -30,11 +30,11 @@ from pathlib import Path
 
 from pydantic import BaseModel, ValidationError
 
-from orchestrator import layout_model as lm
-from orchestrator import operating_point as opm
-from orchestrator.layout_source import Issue, LayoutError, Location, load_located, locate, plain, with_location
-from orchestrator.system import Component, Connection, Experiment, System
-from orchestrator.units import QuantityError, convert, parse, quantity, si_factor
+from webline.orchestrator import layout_model as lm
+from webline.orchestrator import operating_point as opm
+from webline.orchestrator.layout_source import Issue, LayoutError, Location, load_located, locate, plain, with_location
+from webline.orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.units import QuantityError, convert, parse, quantity, si_factor
 
 Layout = lm.Layout
 __all__ = ["Layout", "LayoutError", "load_layout", "build_system", "load_system", "json_schema"]

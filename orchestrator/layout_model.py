@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal, Optional, Union
 from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Discriminator, Field, PrivateAttr, Tag,
                       ValidationInfo, WithJsonSchema)
 
-from orchestrator.units import DIMENSIONS, QuantityError, dimension_of, parse, quantity
+from webline.orchestrator.units import DIMENSIONS, QuantityError, dimension_of, parse, quantity
 
 N_HARMONICS = 8  # Fourier terms per eccentric end (Span FMU: up.C[1..8])
 MAX_PROFILE_POINTS = 32  # Profile FMU table size

@@ -339,5 +339,5 @@ def locate(data, loc_path):
 
 def _looks_like_field(part, cur):
     """A loc part that is absent from ``cur``: a missing field (True) or a union tag (False)?"""
-    from orchestrator.layout_model import UNION_TAGS
+    from webline.orchestrator.layout_model import UNION_TAGS
     return part not in UNION_TAGS

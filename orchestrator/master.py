@@ -57,7 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.results import Recorder
+from webline.orchestrator.results import Recorder
 
 ALGORITHMS = ("jacobi", "gauss-seidel")
 STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
@@ -660,7 +660,7 @@ def simulate(system, fmu_paths=None, progress=True):
     """
     t_setup = _time.perf_counter()
     if fmu_paths is None:
-        from fmus.build import build_all
+        from webline.fmus.build import build_all
         fmu_paths = build_all(log=lambda m: print(m, file=sys.stderr))
     used = {c.model for c in system.components}
     models = {}

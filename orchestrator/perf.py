@@ -1,6 +1,6 @@
 """CPU-time real-time factor and profile split of a layout's co-simulation.
 
-    python -m orchestrator.perf scenarios/ewl_out_of_round.yaml [--stop 10] [--step 1ms]
+    python -m webline.orchestrator.perf scenarios/ewl_out_of_round.yaml [--stop 10] [--step 1ms]
                                 [--algorithm gauss-seidel] [--profile]
 
 Prints the CPU time (``time.process_time``: the machine is shared, wall time
@@ -16,9 +16,9 @@ from pathlib import Path
 
 
 def run(layout, stop=10.0, step=None, algorithm=None, profile=False):
-    from fmus.build import build_all
-    from orchestrator import master
-    from orchestrator.layout import load_system
+    from webline.fmus.build import build_all
+    from webline.orchestrator import master
+    from webline.orchestrator.layout import load_system
 
     overrides = {"experiment.duration": stop}
     if step is not None:
@@ -47,7 +47,7 @@ def run(layout, stop=10.0, step=None, algorithm=None, profile=False):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(prog="python -m orchestrator.perf", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m webline.orchestrator.perf", description=__doc__.splitlines()[0])
     ap.add_argument("layout", type=Path)
     ap.add_argument("--stop", type=float, default=10.0, help="simulated seconds (default 10)")
     ap.add_argument("--step", type=float, default=None, help="macro step in s (default: the layout's)")

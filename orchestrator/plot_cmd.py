@@ -23,8 +23,8 @@ def parser():
 
 def main(argv=None):
     args = parser().parse_args(argv)
-    from orchestrator.plot import plot_results
-    from orchestrator.results import load_results
+    from webline.orchestrator.plot import plot_results
+    from webline.orchestrator.results import load_results
 
     try:
         result = load_results(args.results)

@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
-FMU_DIR = Path(__file__).resolve().parent.parent / "fmus"
 
 
 class AlgebraicLoop(ValueError):
@@ -50,12 +49,12 @@ def fmu_classes():
     the same process, so the two never shadow each other.
     """
     global _CLASSES
-    from fmus.build import model_name, scripts
+    from webline.fmus.build import model_name, scripts
     found = {model_name(s): s for s in scripts()}
     if _CLASSES is None or set(_CLASSES) != set(found):
         classes = {}
         for model, script in found.items():
-            module = importlib.import_module(f"fmus.{Path(script).stem}")
+            module = importlib.import_module(f"webline.fmus.{Path(script).stem}")
             classes[model] = getattr(module, model)
         _CLASSES = classes
     return _CLASSES
@@ -313,7 +312,7 @@ class ReferenceSolution:
         """:class:`~orchestrator.results.Result` at ``t_eval`` (default: the master's
         output times), every output of every component as a column ``<component>.<variable>``;
         extra attributes ``states`` (time x states), ``state_names``, ``info``."""
-        from orchestrator.results import Result
+        from webline.orchestrator.results import Result
         ref = self.ref
         t_eval = output_times(ref.system.experiment) if t_eval is None else np.asarray(t_eval, dtype=float)
         t_eval = np.atleast_1d(t_eval)

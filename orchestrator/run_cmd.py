@@ -47,7 +47,7 @@ def parser():
 
 def summary(result):
     """Short text: mean / peak-to-peak tension per load cell, wall time, real-time factor."""
-    from orchestrator.plot import display_unit, tension_columns
+    from webline.orchestrator.plot import display_unit, tension_columns
 
     lines = []
     m = result.meta
@@ -71,10 +71,10 @@ def summary(result):
 
 def main(argv=None):
     args = parser().parse_args(argv)
-    from orchestrator.master import SetupError, simulate
+    from webline.orchestrator.master import SetupError, simulate
 
     try:
-        from orchestrator.layout import LayoutError, load_system
+        from webline.orchestrator.layout import LayoutError, load_system
     except ImportError as exc:
         print(f"webline run: the layout module is not available ({exc})", file=sys.stderr)
         return 2
@@ -83,7 +83,7 @@ def main(argv=None):
         if args.algorithm:
             system.experiment.algorithm = args.algorithm
         if args.step is not None:
-            from orchestrator.units import QuantityError, quantity
+            from webline.orchestrator.units import QuantityError, quantity
             try:
                 system.experiment.step = quantity(args.step, "time", "--step")
             except QuantityError as exc:

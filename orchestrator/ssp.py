@@ -25,7 +25,7 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-from orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.system import Component, Connection, Experiment, System
 
 NS = {
     "ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
@@ -53,7 +53,7 @@ def _num(value):
 def _interfaces(models, fmu_dir=None):
     """{model: {"parameters": [...], "inputs": [...], "outputs": [...], "unit": {name: unit}}}
     from the FMU classes' declarations (the same data their modelDescription.xml is written from)."""
-    from orchestrator.reference import fmu_classes
+    from webline.orchestrator.reference import fmu_classes
     classes = fmu_classes()
     out = {}
     for m in models:
@@ -170,7 +170,7 @@ def _xml_bytes(root):
 def export_ssp(system, out, fmu_dir=None, name=None, parameter_files=False, log=None):
     """Write ``system`` as an SSP 1.0 zip to ``out`` (the FMUs it uses under
     ``resources/``, built first if out of date). Returns the path."""
-    from fmus.build import DEFAULT_OUT, build_all
+    from webline.fmus.build import DEFAULT_OUT, build_all
     out = Path(out)
     fmu_dir = Path(fmu_dir) if fmu_dir else DEFAULT_OUT
     fmus = build_all(fmu_dir, log=log or (lambda *a: None))

@@ -17,7 +17,7 @@ def main(argv=None):
     ap.add_argument("--fmu-dir", type=Path, help="folder of built FMUs (default build/fmus; built if out of date)")
     args = ap.parse_args(argv)
     try:
-        from orchestrator.layout import load_system
+        from webline.orchestrator.layout import load_system
         system = load_system(args.layout, _overrides(args.set))
     except (OSError, ValueError, KeyError) as e:
         print(f"webline export-ssp: {args.layout}: {e}", file=sys.stderr)
@@ -26,7 +26,7 @@ def main(argv=None):
         system.experiment.stop = args.stop
     if args.step is not None:
         system.experiment.step = args.step
-    from orchestrator.ssp import export_ssp
+    from webline.orchestrator.ssp import export_ssp
     try:
         out = export_ssp(system, args.out, fmu_dir=args.fmu_dir, name=args.layout.stem,
                          parameter_files=args.ssv, log=lambda m: print(m, file=sys.stderr))

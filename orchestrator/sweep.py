@@ -72,7 +72,7 @@ def _ureg():
     global _UREG
     if _UREG is None:
         try:
-            from orchestrator.units import ureg
+            from webline.orchestrator.units import ureg
             _UREG = ureg
         except ImportError:
             import pint
@@ -82,7 +82,7 @@ def _ureg():
 
 def _parse(text):
     try:
-        from orchestrator.units import parse
+        from webline.orchestrator.units import parse
     except ImportError:
         return _ureg().Quantity(text)
     return parse(text)
@@ -386,7 +386,7 @@ def validate_overrides(sweep, limit=200):
     """Load the system of the runs (the first ``limit``) in this process, before any run
     starts: a dotted key or value the layout rejects is a :class:`SweepError` naming the
     sweep file and the field."""
-    from orchestrator.layout import LayoutError, load_system
+    from webline.orchestrator.layout import LayoutError, load_system
     for run in sweep.runs[:limit]:
         try:
             load_system(sweep.layout, dict(run.overrides))
@@ -545,9 +545,9 @@ def execute_run(task):
 
 
 def _simulate_task(task):
-    from orchestrator.layout import load_system
-    from orchestrator.master import simulate
-    from orchestrator import results as results_mod
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.master import simulate
+    from webline.orchestrator import results as results_mod
     run_dir = Path(task["run_dir"])
     system = load_system(task["layout"], dict(task["overrides"]))
     fmu_paths = {k: Path(v) for k, v in task["fmu_paths"].items()} if task.get("fmu_paths") else None
@@ -586,7 +586,7 @@ def _save_results(results_mod, result, system, run_dir):
         fn = getattr(results_mod, name, None)
         if fn is not None:
             return fn(result, Path(run_dir))
-    raise RuntimeError("orchestrator.results has no known writer")
+    raise RuntimeError("webline.orchestrator.results has no known writer")
 
 
 def execute_run_isolated(task):
@@ -598,7 +598,7 @@ def execute_run_isolated(task):
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
     t = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "orchestrator.sweep", "--run-task"],
+    proc = subprocess.run([sys.executable, "-m", "webline.orchestrator.sweep", "--run-task"],
                           input=json.dumps(task), text=True, capture_output=True, env=env)
     try:
         summary = json.loads((run_dir / SUMMARY).read_text())
@@ -704,7 +704,7 @@ def run_sweep(sweep, out, scheduler=None, workers=None, progress=True, force=Fal
     out = Path(out)
     (out / "runs").mkdir(parents=True, exist_ok=True)
     if fmu_paths is None and runner is None:
-        from fmus.build import build_all
+        from webline.fmus.build import build_all
         fmu_paths = build_all(log=lambda m: log(f"sweep: {m}"))
     summaries, todo, keys = {}, [], set()
     for run in sweep.runs:
@@ -809,7 +809,7 @@ def read_table(path):
 
 
 def _run_task_main():
-    """``python -m orchestrator.sweep --run-task`` < task.json: one run in this process."""
+    """``python -m webline.orchestrator.sweep --run-task`` < task.json: one run in this process."""
     task = json.loads(sys.stdin.read())
     summary = execute_run(task)
     return 0 if summary.get("status") == "ok" else 1
@@ -818,4 +818,4 @@ def _run_task_main():
 if __name__ == "__main__":
     if sys.argv[1:] == ["--run-task"]:
         sys.exit(_run_task_main())
-    sys.exit("usage: python -m orchestrator.sweep --run-task < task.json (use 'webline sweep')")
+    sys.exit("usage: python -m webline.orchestrator.sweep --run-task < task.json (use 'webline sweep')")

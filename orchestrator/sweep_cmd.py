@@ -32,7 +32,7 @@ def main(argv=None):
     if args.workers is not None and args.workers < 1:
         ap.error("--workers must be >= 1")
 
-    from orchestrator.sweep import SweepError, load_sweep, run_sweep, validate_overrides
+    from webline.orchestrator.sweep import SweepError, load_sweep, run_sweep, validate_overrides
     try:
         sweep = load_sweep(args.sweep)
         validate_overrides(sweep)
@@ -56,7 +56,7 @@ def main(argv=None):
         if r["status"] != "ok":
             print(f"  {r['run_id']} {r['status']}: {r.get('error', '')[:300]}", file=sys.stderr)
     if sweep.plot and not args.no_plot:
-        from orchestrator.sweep_plot import plot_sweep
+        from webline.orchestrator.sweep_plot import plot_sweep
         try:
             for p in plot_sweep(out):
                 print(f"plot -> {p}")

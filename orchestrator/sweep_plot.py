@@ -27,7 +27,7 @@ import math
 import sys
 from pathlib import Path
 
-from orchestrator.sweep import TABLE, read_table
+from webline.orchestrator.sweep import TABLE, read_table
 
 
 def _num(v):

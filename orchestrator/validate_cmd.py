@@ -31,7 +31,7 @@ def main(argv=None):
     ap.add_argument("--schema", action="store_true", help="print the layout JSON schema and exit")
     args = ap.parse_args(argv)
 
-    from orchestrator.layout import LayoutError, build_system, json_schema, load_layout
+    from webline.orchestrator.layout import LayoutError, build_system, json_schema, load_layout
     if args.schema:
         print(json.dumps(json_schema(), indent=2, sort_keys=False))
         return 0

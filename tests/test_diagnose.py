@@ -62,9 +62,9 @@ def line(tmp_path_factory, fmus):
 def make_run(folder, name, layout, fmus, speed="200 ft/min", hidden=None, noise=NOISE, seed=0):
     """Simulate the line with a hidden eccentricity, add noise, write CSV + run YAML.
     Returns (run file, mean rotation frequency of the hidden element in Hz)."""
-    from orchestrator.layout import load_system
-    from orchestrator.master import simulate
-    from diagnosis.runs import write_csv
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.master import simulate
+    from webline.diagnosis.runs import write_csv
     ov = {"experiment.line_speed": speed}
     if hidden:
         ov[f"path.{hidden['element']}.eccentricity.C"] = "[" + ", ".join(hidden["C"]) + "]"
@@ -84,7 +84,7 @@ def make_run(folder, name, layout, fmus, speed="200 ft/min", hidden=None, noise=
 
 
 def diagnose(args):
-    from diagnosis.diagnose_cmd import main
+    from webline.diagnosis.diagnose_cmd import main
     return main([str(a) for a in args] + ["--quiet"])
 
 

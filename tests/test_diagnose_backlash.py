@@ -17,7 +17,7 @@ import math
 import numpy as np
 import pytest
 
-from diagnosis import benchmark as B
+from webline.diagnosis import benchmark as B
 
 BACKLASH_DEG = 1.8
 

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from diagnosis import estimate as est
+from webline.diagnosis import estimate as est
 
 FS = 500.0
 

@@ -13,7 +13,7 @@ the master, diagnosis run blind in a subprocess.
 """
 import pytest
 
-from diagnosis import benchmark as B
+from webline.diagnosis import benchmark as B
 
 MM = 1e-3
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from diagnosis import benchmark as B
+from webline.diagnosis import benchmark as B
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +27,7 @@ def line(tmp_path_factory):
 
 # ------------------------------------------------------------------ generator ----
 def test_derived_line_is_a_valid_smaller_ewl(line):
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     doc, path, facts = line
     assert [e["name"] for e in doc["path"]] == list(B.KEEP)
     assert "span" not in doc["path"][-1]

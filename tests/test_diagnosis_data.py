@@ -1,10 +1,10 @@
-"""diagnosis.data: measured CSV / MATLAB records into SI, and every defect named."""
+"""webline.diagnosis.data: measured CSV / MATLAB records into SI, and every defect named."""
 import h5py
 import numpy as np
 import pytest
 import scipy.io
 
-from diagnosis.data import DataError, from_arrays, load, si_unit
+from webline.diagnosis.data import DataError, from_arrays, load, si_unit
 
 LBF = 4.4482216152605  # N
 FPM = 0.00508  # m/s

@@ -1,8 +1,8 @@
-"""diagnosis.metrics: model-vs-measurement errors and residual decomposition, on known answers."""
+"""webline.diagnosis.metrics: model-vs-measurement errors and residual decomposition, on known answers."""
 import numpy as np
 import pytest
 
-from diagnosis import metrics as mt
+from webline.diagnosis import metrics as mt
 
 
 def sine(t, f, a=1.0, p=0.0):

@@ -1,10 +1,10 @@
-"""diagnosis.orders: shaft angles from tachs, and harmonics that stay sharp when a roll shrinks."""
+"""webline.diagnosis.orders: shaft angles from tachs, and harmonics that stay sharp when a roll shrinks."""
 import numpy as np
 import pytest
 
-from diagnosis import orders as od
-from diagnosis.spectra import amplitude_spectrum
-from diagnosis.synthetic import FPM, INCH, ewl_like, harmonics, pulse_train, roll_angle
+from webline.diagnosis import orders as od
+from webline.diagnosis.spectra import amplitude_spectrum
+from webline.diagnosis.synthetic import FPM, INCH, ewl_like, harmonics, pulse_train, roll_angle
 
 
 @pytest.fixture(scope="module")

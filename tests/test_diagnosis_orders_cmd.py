@@ -4,8 +4,8 @@ import json
 import numpy as np
 import pytest
 
-from diagnosis import orders_cmd
-from diagnosis.synthetic import ewl_like
+from webline.diagnosis import orders_cmd
+from webline.diagnosis.synthetic import ewl_like
 from webline import cli
 
 LBF = 4.4482216152605
@@ -31,7 +31,7 @@ def run(capsys, *argv):
 
 
 def test_registered():
-    assert cli.COMMANDS["orders"][0] == "diagnosis.orders_cmd"
+    assert cli.COMMANDS["orders"][0] == "webline.diagnosis.orders_cmd"
 
 
 def test_orders_end_to_end(csv_path, tmp_path, capsys):

@@ -1,10 +1,10 @@
-"""diagnosis.spectra: calibrated spectra, significant peaks only, and tags to shaft families."""
+"""webline.diagnosis.spectra: calibrated spectra, significant peaks only, and tags to shaft families."""
 import numpy as np
 import pytest
 
-from diagnosis import spectra as sp
-from diagnosis.orders import shaft_frequency
-from diagnosis.synthetic import ewl_like
+from webline.diagnosis import spectra as sp
+from webline.diagnosis.orders import shaft_frequency
+from webline.diagnosis.synthetic import ewl_like
 
 
 def tone(t, f, a, p=0.0):

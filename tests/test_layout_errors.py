@@ -1,8 +1,8 @@
 """Bad layouts: every problem reported as ``file:line: field: reason`` before anything runs."""
 import pytest
 
-from orchestrator.layout import LayoutError, load_layout, load_system
-from orchestrator.validate_cmd import main as validate_main
+from webline.orchestrator.layout import LayoutError, load_layout, load_system
+from webline.orchestrator.validate_cmd import main as validate_main
 
 # A small valid line; the tests edit one line and expect that line in the error.
 MINI = """\
@@ -251,7 +251,7 @@ def test_validate_command(tmp_path, capsys):
 
 def test_webline_cli_dispatches_validate(tmp_path, capsys):
     from webline.cli import COMMANDS, main
-    assert COMMANDS["validate"][0] == "orchestrator.validate_cmd"
+    assert COMMANDS["validate"][0] == "webline.orchestrator.validate_cmd"
     assert main(["validate", str(write(tmp_path, MINI))]) == 0
 
 
@@ -266,7 +266,7 @@ def test_rewind_may_start_on_its_bare_core(tmp_path):
 
 def test_layout_made_in_code_is_checked_when_built():
     import yaml
-    from orchestrator.layout import Layout, build_system
+    from webline.orchestrator.layout import Layout, build_system
     data = yaml.safe_load(MINI)
     system = build_system(Layout.model_validate(data, context={"width": 0.1524}))
     assert system.check() == [] and system.meta["layout"] == "<layout>"

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.layout import load_system, span_ends, load_layout
+from webline.orchestrator.layout import load_system, span_ends, load_layout
 from webline.physics.controllers import speed_gains
 from webline.physics.material_roll import radius_rate
 
@@ -159,7 +159,7 @@ def test_eccentricity_sign_convention_from_wrap():
 def test_start_is_an_equilibrium_of_the_element_models():
     """dx/dt = 0 at t = 0 for every state but angles and roll radii; a roll's speed changes only as
     much as keeps its surface speed while its radius changes ({5})."""
-    reference = pytest.importorskip("orchestrator.reference")
+    reference = pytest.importorskip("webline.orchestrator.reference")
     for ov in ({}, {"experiment.line_speed": 0},
                {"drives.master": "unwind", "drives.tension_loops.unwind_zone.element": "sw_leader"},
                {"drives.speed_loops.pull_roll.feedforward": "false", "sensors.lc9.angle_in": "30 deg"}):

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from orchestrator.layout import build_system, json_schema, load_layout, load_system
+from webline.orchestrator.layout import build_system, json_schema, load_layout, load_system
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -24,7 +24,7 @@ PAPER = ROOT / "scenarios" / "paper"
 
 def fmu_variables():
     """{model: (parameters, inputs, outputs)} from the FMU scripts' declarations."""
-    from orchestrator.reference import fmu_classes
+    from webline.orchestrator.reference import fmu_classes
     out = {}
     for model, cls in fmu_classes().items():
         out[model] = ({v.name for v in cls.parameters()}, {v.name for v in cls.INPUTS}, {v.name for v in cls.OUTPUTS})

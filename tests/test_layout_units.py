@@ -1,9 +1,9 @@
-"""orchestrator.units: web-handling units, dimension checks, errors naming where."""
+"""webline.orchestrator.units: web-handling units, dimension checks, errors naming where."""
 import math
 
 import pytest
 
-from orchestrator.units import QuantityError, convert, quantity, si_factor
+from webline.orchestrator.units import QuantityError, convert, quantity, si_factor
 
 
 @pytest.mark.parametrize("text, dimension, si", [

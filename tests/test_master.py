@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.master import SetupError, simulate
-from orchestrator.results import load_results
-from orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.master import SetupError, simulate
+from webline.orchestrator.results import load_results
+from webline.orchestrator.system import Component, Connection, Experiment, System
 
 EA = 2.0e4
 L0 = 0.2  # time constant L0/v = 0.2 s

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.master import simulate
-from orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.master import simulate
+from webline.orchestrator.system import Component, Connection, Experiment, System
 
 ROOT = Path(__file__).resolve().parents[1]
 EA, L, R, J = 5800.0, 1.0, 0.05, 0.05
@@ -59,7 +59,7 @@ def line(algorithm, stop=3.0, T0=0.0, tension_step=None):
 
 @pytest.fixture(scope="module")
 def reference():
-    from orchestrator.reference import simulate_reference
+    from webline.orchestrator.reference import simulate_reference
     return simulate_reference(line("gauss-seidel"))
 
 
@@ -111,7 +111,7 @@ def test_tension_step_is_followed(fmus, algorithm):
 
 
 def test_plots_and_markers(runs, tmp_path):
-    from orchestrator.plot import amplitude_spectrum, harmonic_markers, plot_results, tension_columns
+    from webline.orchestrator.plot import amplitude_spectrum, harmonic_markers, plot_results, tension_columns
 
     r = runs["gauss-seidel"]
     assert tension_columns(r) == ["lc.T"]
@@ -137,7 +137,7 @@ def test_run_and_plot_commands_help():
 
 
 def test_plot_command_on_saved_results(runs, tmp_path):
-    from orchestrator.plot_cmd import main
+    from webline.orchestrator.plot_cmd import main
 
     runs["gauss-seidel"].save(tmp_path / "res", csv=True)
     assert main([str(tmp_path / "res"), "--out", str(tmp_path / "png")]) == 0
@@ -150,7 +150,7 @@ EWL = ROOT / "scenarios" / "ewl_out_of_round.yaml"
 
 def _layout_ready():
     import importlib.util
-    return importlib.util.find_spec("orchestrator.layout") is not None and EWL.exists()
+    return importlib.util.find_spec("webline.orchestrator.layout") is not None and EWL.exists()
 
 
 @pytest.mark.skipif(not _layout_ready(), reason="orchestrator/layout.py or the EWL scenario not there yet")
@@ -172,7 +172,7 @@ def test_end_to_end_run_and_plot(tmp_path):
 
 @pytest.mark.skipif(not _layout_ready(), reason="orchestrator/layout.py or the EWL scenario not there yet")
 def test_run_command_rejects_bad_layout_and_reports_failure(tmp_path):
-    from orchestrator.run_cmd import main
+    from webline.orchestrator.run_cmd import main
 
     bad = tmp_path / "bad.yaml"
     bad.write_text("this: [is not a layout\n")
@@ -186,8 +186,8 @@ def test_run_command_rejects_bad_layout_and_reports_failure(tmp_path):
 def test_run_command_failure_saves_partial_results(tmp_path, capsys):
     """Jacobi at 5 ms diverges on the EWL within a fraction of a second (docs/performance.md: the
     extrapolated coupling keeps it stable only up to about 1 ms): exit 1, message, partial results."""
-    from orchestrator.results import load_results
-    from orchestrator.run_cmd import main
+    from webline.orchestrator.results import load_results
+    from webline.orchestrator.run_cmd import main
 
     out = tmp_path / "o"
     code = main([str(EWL), "--set", "experiment.duration=2 s", "--algorithm", "jacobi", "--step", "5 ms",
@@ -201,8 +201,8 @@ def test_run_command_failure_saves_partial_results(tmp_path, capsys):
 
 def test_plot_helpers_follow_the_layout_meta():
     """Sensors as the layout writes them ({name: {component: ...}}), display units, line speed."""
-    from orchestrator.plot import display_unit, line_speed_column, speed_columns, tension_columns
-    from orchestrator.results import Result
+    from webline.orchestrator.plot import display_unit, line_speed_column, speed_columns, tension_columns
+    from webline.orchestrator.results import Result
 
     t = np.linspace(0, 1, 11)
     cols = ["a.T", "b.T", "lc.T", "u.v", "i.v", "line_speed.y"]

@@ -27,10 +27,10 @@ import scipy.optimize
 import scipy.signal
 import yaml
 
-from diagnosis.orders import harmonic_fit, joint_harmonic_fit
-from diagnosis.spectra import amplitude_spectrum, frequency_resolution, interpolate_peak, spectral_peaks
-from orchestrator.layout import load_system
-from orchestrator.master import simulate
+from webline.diagnosis.orders import harmonic_fit, joint_harmonic_fit
+from webline.diagnosis.spectra import amplitude_spectrum, frequency_resolution, interpolate_peak, spectral_peaks
+from webline.orchestrator.layout import load_system
+from webline.orchestrator.master import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS_DIR = ROOT / "scenarios"

@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.reference import (AlgebraicLoop, ReferenceSystem, fmu_classes, output_times,
+from webline.orchestrator.reference import (AlgebraicLoop, ReferenceSystem, fmu_classes, output_times,
                                     simulate_reference, solve_reference)
-from orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.system import Component, Connection, Experiment, System
 from webline.physics.span import steady_state_tension
 
 EA = 2.0e4
@@ -204,7 +204,7 @@ def test_ewl_operating_point_is_held_by_the_reference():
     layout = Path(__file__).resolve().parent.parent / "scenarios" / "ewl.yaml"
     if not layout.exists():
         pytest.skip("no scenarios/ewl.yaml")
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     system = load_system(layout)
     system.experiment.stop, system.experiment.output_interval = 1.0, 0.1
     for c in system.components:

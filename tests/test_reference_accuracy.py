@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from orchestrator.accuracy import json_ready, load_cells, markdown_table, measure, relative_rms, without_noise
-from orchestrator.accuracy_cmd import parse_step
-from orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.accuracy import json_ready, load_cells, markdown_table, measure, relative_rms, without_noise
+from webline.orchestrator.accuracy_cmd import parse_step
+from webline.orchestrator.system import Component, Connection, Experiment, System
 
 EA, V0, V2, R = 2.0e4, 1.0, 1.01, 0.05
 

@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.reference import simulate_reference
-from orchestrator.ssp import export_ssp, read_ssp, simulate_libcosim
-from orchestrator.system import Component, Connection, Experiment, System
+from webline.orchestrator.reference import simulate_reference
+from webline.orchestrator.ssp import export_ssp, read_ssp, simulate_libcosim
+from webline.orchestrator.system import Component, Connection, Experiment, System
 
 EA = 2.0e4
 
@@ -86,7 +86,7 @@ def test_libcosim_reads_the_step_from_the_ssd(two_span_ssp):
 
 
 def test_libcosim_matches_our_master(two_span_ssp):
-    from orchestrator.master import simulate
+    from webline.orchestrator.master import simulate
     ours = simulate(two_spans(), progress=False)  # Jacobi, as libcosim's fixed-step algorithm
     assert ours.ok
     t, d = simulate_libcosim(two_span_ssp)
@@ -125,7 +125,7 @@ def _outputs_valid_in_initialization_mode():
     along connections (our master reads them after initialisation); a wrapper
     that builds its model only in exit_initialization_mode answers the declared
     start value, and the first step of libcosim then starts from wrong inputs."""
-    from orchestrator.reference import fmu_classes
+    from webline.orchestrator.reference import fmu_classes
     classes = fmu_classes()
     if "SpeedPI" not in classes:
         return True
@@ -143,7 +143,7 @@ def _outputs_valid_in_initialization_mode():
 def ewl_short(tmp_path_factory):
     if not EWL.exists():
         pytest.skip("no scenarios/ewl.yaml")
-    from orchestrator.layout import load_system
+    from webline.orchestrator.layout import load_system
     system = load_system(EWL)
     # libcosim's fixed-step algorithm is Jacobi-like; the EWL's web-guide mode
     # (~30 Hz, nearly undamped) needs a short step under Jacobi coupling.
@@ -170,7 +170,7 @@ def test_ewl_exports_valid_ssp(ewl_short):
                           "during initialisation, so its first step differs")
 def test_ewl_in_libcosim_matches_our_master(ewl_short):
     system, path = ewl_short
-    from orchestrator.master import simulate
+    from webline.orchestrator.master import simulate
     ours = simulate(system, progress=False)
     assert ours.ok, ours.message
     t, d = simulate_libcosim(path)

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.sweep import (SweepError, dominant_frequency, load_sweep, read_table, run_sweep)
-from orchestrator import sweep_cmd
+from webline.orchestrator.sweep import (SweepError, dominant_frequency, load_sweep, read_table, run_sweep)
+from webline.orchestrator import sweep_cmd
 
 ROOT = Path(__file__).resolve().parent.parent
 FAKE = "sweep_fakes:fake_run"

@@ -8,17 +8,17 @@ import sys
 
 # sub-command -> (module with main(argv) -> int, one-line help)
 COMMANDS = {
-    "build-fmus": ("fmus.build", "build every element FMU into one folder"),
-    "orders": ("diagnosis.orders_cmd", "order spectra and shaft-tagged tension peaks of measured data"),
-    "run": ("orchestrator.run_cmd", "co-simulate a line layout, save results.h5 (and .csv)"),
-    "plot": ("orchestrator.plot_cmd", "plot tensions, speeds and tension spectra of a run"),
-    "sweep": ("orchestrator.sweep_cmd", "run a parameter sweep (grid / Monte Carlo) of a layout"),
-    "plot-sweep": ("orchestrator.sweep_plot", "plot a finished sweep (sweep.csv)"),
-    "accuracy": ("orchestrator.accuracy_cmd", "co-simulation error vs the monolithic reference, per step/algorithm"),
-    "export-ssp": ("orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
-    "validate": ("orchestrator.validate_cmd", "check a line layout (file:line: field: reason), print its operating point"),
-    "diagnose": ("diagnosis.diagnose_cmd", "find the unmodelled effect behind a model-vs-measured tension gap"),
-    "diagnose-bench": ("diagnosis.benchmark_cmd", "benchmark webline diagnose on lines with hidden effects"),
+    "build-fmus": ("webline.fmus.build", "build every element FMU into one folder"),
+    "orders": ("webline.diagnosis.orders_cmd", "order spectra and shaft-tagged tension peaks of measured data"),
+    "run": ("webline.orchestrator.run_cmd", "co-simulate a line layout, save results.h5 (and .csv)"),
+    "plot": ("webline.orchestrator.plot_cmd", "plot tensions, speeds and tension spectra of a run"),
+    "sweep": ("webline.orchestrator.sweep_cmd", "run a parameter sweep (grid / Monte Carlo) of a layout"),
+    "plot-sweep": ("webline.orchestrator.sweep_plot", "plot a finished sweep (sweep.csv)"),
+    "accuracy": ("webline.orchestrator.accuracy_cmd", "co-simulation error vs the monolithic reference, per step/algorithm"),
+    "export-ssp": ("webline.orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
+    "validate": ("webline.orchestrator.validate_cmd", "check a line layout (file:line: field: reason), print its operating point"),
+    "diagnose": ("webline.diagnosis.diagnose_cmd", "find the unmodelled effect behind a model-vs-measured tension gap"),
+    "diagnose-bench": ("webline.diagnosis.benchmark_cmd", "benchmark webline diagnose on lines with hidden effects"),
 }
 
 
