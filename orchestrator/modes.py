@@ -289,13 +289,17 @@ def modes(lin, zero_tol=1e-6):
     """Modes of ``lin``: one per real eigenvalue and per complex pair (Im > 0), sorted by
     frequency. Each: ``eigenvalue``, ``f`` (Hz, 0 for a real one), ``zeta`` (damping ratio;
     1 for a real stable one), ``tau`` (s, 1/|Re| or None), ``kind`` (oscillatory, real,
-    integrator), ``moves`` [(name, share of modal energy), ...] top 3, ``mechanical``
-    (share of the eigenvector's energy-weighted norm on spans and rollers, relative)."""
+    integrator), ``moves`` [(name, share of modal energy), ...] top 3 (a mode that moves no
+    span or roller: [(its largest state, 1.0)]), ``mechanical`` (share of the unit
+    eigenvector's squared norm on span tensions and roller speeds)."""
     if lin.A.size == 0:
         return []
     lam, V = np.linalg.eig(lin.A)
     big = max(1.0, float(np.max(np.abs(lam))))
     weights, labels = _energy_weights(lin)
+    kinds = lin.info["state_kinds"]
+    spans = [i for i, (_, m, s) in enumerate(kinds) if m == "Span"]
+    filters = [i for i, (_, m, s) in enumerate(kinds) if m == "LoadCell"]
     out = []
     for k, l in enumerate(lam):
         if l.imag < -1e-9 * big:
@@ -307,6 +311,15 @@ def modes(lin, zero_tol=1e-6):
                 e[lab] = e.get(lab, 0.0) + w * abs(v[i]) ** 2
         tot = sum(e.values())
         moves = sorted(((n, x / tot) for n, x in e.items()), key=lambda p: -p[1])[:3] if tot > 0 else []
+        # share of the eigenvector (unit 2-norm, states in SI) on spans and rollers: a mode
+        # of a controller or a load-cell filter barely moves the web
+        mech = float(np.sum(np.abs(v[weights > 0]) ** 2) / max(1e-300, np.sum(np.abs(v) ** 2)))
+        # a load-cell filter mode: the filter state (N) far above every span tension (N)
+        span_v = max((abs(v[i]) for i in spans), default=0.0)
+        lc_v = [(abs(v[i]), i) for i in filters]
+        if mech < 1e-6 or (lc_v and max(lc_v)[0] > 3.0 * span_v):
+            i = max(lc_v)[1] if lc_v and max(lc_v)[0] > 3.0 * span_v else int(np.argmax(np.abs(v)))
+            moves = [(lin.states[i], 1.0)]
         a = abs(l)
         if a <= zero_tol * big:
             kind, zeta = "integrator", None
@@ -316,7 +329,7 @@ def modes(lin, zero_tol=1e-6):
             kind, zeta = "oscillatory", -l.real / a
         out.append({"eigenvalue": complex(l), "f": abs(l.imag) / (2 * math.pi), "zeta": zeta,
                     "tau": (1.0 / abs(l.real)) if l.real != 0 else None, "kind": kind,
-                    "moves": [(n, float(s)) for n, s in moves]})
+                    "moves": [(n, float(s)) for n, s in moves], "mechanical": mech})
     out.sort(key=lambda m: (m["f"], -m["eigenvalue"].real))
     return out
 
