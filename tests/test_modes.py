@@ -195,3 +195,37 @@ def test_cli_bad_layout_exits_2(tmp_path, capsys):
     assert "missing.yaml" in capsys.readouterr().err
     assert main(["modes", str(EWL), "--fmin", "5", "--fmax", "1"]) == 2
     assert "fmin" in capsys.readouterr().err
+
+
+def test_mode_free_response_in_the_reference_grows_at_its_eigenvalue():
+    """At zero line speed the spans lose their -v/L damping and the linearisation finds the rewind
+    zone's 14.4 Hz idler mode (roller19, spans 11 and 13) slightly unstable, Re lambda = +0.07 1/s.
+    Started on that eigenvector (0.01 N: linear), the monolithic reference (LSODA, rtol 1e-10)
+    grows at the same rate: amplitudes of the 14.4 Hz line in two 0.4 s windows 1.5 s apart.
+    Other modes are not excited, so the window fits are clean to ~1e-3 of the growth rate."""
+    from scipy.integrate import solve_ivp
+    from webline.orchestrator.reference import ReferenceSystem
+    system = load_system(PAPER_A, {"experiment.duration": "1.9 s"})  # before the T_ref step at 2 s
+    ref = ReferenceSystem(M.round_system(system))
+    lin = M.linearise(ref)
+    lam, V = np.linalg.eig(lin.A)
+    k = max(range(len(lam)), key=lambda i: lam[i].real if lam[i].imag > 1.0 else -np.inf)
+    assert lam[k].imag / (2 * math.pi) == pytest.approx(14.39, abs=0.05)
+    assert lam[k].real > 0.03
+    v = V[:, k] / np.max(np.abs(V[:, k]))
+    x = ref.x0.copy()
+    x[[ref.state_names.index(n) for n in lin.states]] += 0.01 * v.real
+    sol = solve_ivp(ref.rhs, (0.0, 1.9), x, method="LSODA", rtol=1e-10, atol=1e-10, dense_output=True)
+    assert sol.success
+    t = np.linspace(0.0, 1.9, 4000)
+    j = ref.state_names.index("span11.T")
+    y = sol.sol(t)[j] - ref.x0[j]
+    basis = np.column_stack([np.cos(lam[k].imag * t), np.sin(lam[k].imag * t)])
+
+    def amplitude(a, b):
+        m = (t >= a) & (t < b)
+        c, *_ = np.linalg.lstsq(basis[m], y[m], rcond=None)
+        return np.hypot(*c)
+
+    rate = math.log(amplitude(1.5, 1.9) / amplitude(0.0, 0.4)) / 1.5
+    assert rate == pytest.approx(lam[k].real, rel=0.02)
