@@ -120,31 +120,43 @@ def test_paper_a_tension_loop_pair(light_idlers):
     assert m["moves"][0][0].startswith("span")
 
 
-def test_harmonic_gains_match_a_simulation():
-    """A 20 um first-harmonic eccentricity on idler_u1 of the EWL (4.24 Hz at 200 ft/min, between
-    the 0.91 Hz tension-loop and 9.46 Hz idler modes): the load cells' harmonic from the
-    monolithic reference (eccentric minus round, least squares on the idler's angle after 2 s of
-    transient) against G(j omega) of the linearisation, in the diagnosis's convention
-    (Y = G X, X = C exp(i psi)). The decaying start transient of the 0.91 Hz mode leaks into
-    the fit: lc9 (|G| 2.1e3 N/m) to 0.1 %, lc15 (2.95 N/m, behind the S-wrap) to 2 %."""
+@pytest.fixture(scope="module")
+def ewl_round_run():
+    from webline.orchestrator.reference import simulate_reference
+    return simulate_reference(load_system(EWL, {"experiment.duration": "8 s"}))
+
+
+@pytest.mark.parametrize("element, tolerances", [
+    ("idler_u1", {"lc9.T": 0.01, "lc15.T": 0.05}),
+    ("pull_roll", {"lc15.T": 0.02, "lc19.T": 0.02}),
+])
+def test_harmonic_gains_match_a_simulation(ewl_round_run, element, tolerances):
+    """A 20 um first-harmonic eccentricity on an EWL roller, off resonance: idler_u1 (90 deg wrap,
+    4.24 Hz at 200 ft/min, between the 0.91 Hz tension-loop and 9.46 Hz idler modes) and the
+    driven pull roll (180 deg wrap, 2.12 Hz, above the 1.40 Hz rewind loop). The load cells'
+    harmonic from the monolithic reference (eccentric minus round, least squares on the element's
+    angle after 2 s of transient) against G(j omega) of the linearisation, in the diagnosis's
+    convention (Y = G X, X = C exp(i psi)). The decaying start transient of the tension-loop
+    modes leaks into the fit: measured 0.03 % on lc9 (|G| 2.1e3 N/m), 1.4 % on lc15 (2.95 N/m,
+    behind the S-wrap) for idler_u1; 0.6 % for the pull roll (2.0e3 and 3.0e3 N/m)."""
     from webline.diagnosis.estimate import fit_harmonics
     from webline.orchestrator.reference import simulate_reference
     C, psi = 20e-6, 0.7
-    ov = {"experiment.duration": "8 s"}
-    base = load_system(EWL, ov)
-    ecc = load_system(EWL, {**ov, "idler_u1.eccentricity": f"{{C: [{C * 1e6:g} um], psi: [{psi} rad]}}"})
-    f0 = base.meta["elements"]["idler_u1"]["f0"]
-    G = M.harmonic_gains(base, "idler_u1", [f0])
+    rb = ewl_round_run
+    ecc = load_system(EWL, {"experiment.duration": "8 s",
+                            f"{element}.eccentricity": f"{{C: [{C * 1e6:g} um], psi: [{psi} rad]}}"})
+    f0 = ecc.meta["elements"][element]["f0"]
+    G = M.harmonic_gains(ecc, element, [f0])  # the eccentricity in the layout is ignored: it is the input
     assert set(G) == {"lc9.T", "lc15.T", "lc19.T"}
-    rb, re = simulate_reference(base), simulate_reference(ecc)
+    re = simulate_reference(ecc)
     mask = rb.time >= 2.0
     X = C * np.exp(1j * psi)
-    for lc, rel in (("lc9.T", 0.01), ("lc15.T", 0.05)):
-        Y = fit_harmonics(re[lc] - rb[lc], re["idler_u1.theta"], [1], mask)[0]
+    for lc, rel in tolerances.items():
+        Y = fit_harmonics(re[lc] - rb[lc], re[f"{element}.theta"], [1], mask)[0]
         g_sim, g_lin = Y / X, G[lc][0]
+        assert abs(g_lin) > 1.0
         assert abs(g_sim) == pytest.approx(abs(g_lin), rel=rel), lc
         assert abs(np.angle(g_sim / g_lin)) < rel, lc
-    assert abs(G["lc9.T"][0]) > 1e3
 
 
 def test_harmonic_gains_follow_the_layout_convention(ewl):
