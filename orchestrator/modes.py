@@ -79,8 +79,9 @@ def round_system(system):
 
 # ---- the ODE with input offsets --------------------------------------------------------
 def _evaluate(ode, t, xl, du):
-    """Route all outputs at (t, xl) with the inputs offset by ``du`` {(comp, input): delta};
-    returns per component the input list its model sees."""
+    """Route all outputs at (t, xl) with the inputs offset by ``du`` {comp index: {input index:
+    delta}} (the offset input is what the component's model sees, on top of what its connection
+    routes in). Returns ({comp: its input list}, {comp: its outputs})."""
     seen = {}
 
     def inputs(c):
