@@ -90,8 +90,11 @@ def main(argv=None):
         args.out.mkdir(parents=True, exist_ok=True)
         path = args.out / "modes.json"
         path.write_text(json.dumps(to_json(args.layout, system, lin, mode_list, freqs, tfs), indent=1))
-        png = bode_plot(lin, mode_list, freqs, tfs, args.out / "bode.png", title=system.meta.get("name", ""))
-        print(f"\nwrote {path} and {png}")
+        if lin.outputs:
+            png = bode_plot(lin, mode_list, freqs, tfs, args.out / "bode.png", title=system.meta.get("name", ""))
+            print(f"\nwrote {path} and {png}")
+        else:
+            print(f"\nwrote {path} (no load cells: no Bode plot)")
     return 0
 
 
@@ -139,6 +142,9 @@ def report(layout, system, lin, mode_list, freqs, tfs):
                 flag = "  UNSTABLE" if m["eigenvalue"].real > 0 else ""
                 lines.append(f"  {m['tau']:8.4g} {m['eigenvalue'].real:10.4g}  {_moves(m)}{flag}")
     lines.append("")
+    if not lin.outputs:
+        lines.append("no load cells: no transfer functions")
+        return "\n".join(lines)
     lines.append(f"peak gain |G| (at f in Hz) over {freqs[0]:.3g}-{freqs[-1]:.3g} Hz; "
                  "span-length change (.dL) in N/m, motor torque (.tau) in N/(N.m):")
     width = 20
@@ -176,6 +182,11 @@ def to_json(layout, system, lin, mode_list, freqs, tfs):
                    "tau_s": m["tau"], "moves": [{"name": n, "share": s} for n, s in m["moves"]]}
                   for m in mode_list],
         "load_cells": lin.outputs,
+        "linear_model": {"about": "dx/dt = A x + B u + B_rate du/dt, y = C x + D u; deviations from the "
+                                  "operating point, SI; u: span-end lengths (m), then motor torques (N.m)",
+                         "states": lin.states, "inputs": lin.inputs, "outputs": lin.outputs,
+                         "A": lin.A.tolist(), "B": lin.B.tolist(), "B_rate": lin.B_rate.tolist(),
+                         "C": lin.C.tolist(), "D": lin.D.tolist()},
         "transfer_functions": {"f_Hz": [float(f) for f in freqs], "inputs": inputs,
                                "convention": "G = Y/X with x(t) = Im(X exp(i 2 pi f t)), y likewise; "
                                              ".dL: the element's span-length change (its eccentricity "
