@@ -196,6 +196,9 @@ def test_cli_table_json_png(tmp_path, capsys):
     assert len(lc9["magnitude"]) == len(tf["f_Hz"]) and max(lc9["magnitude"]) > 1e4
     # nothing downstream of the speed-controlled S-wrap reaches the unwind zone
     assert tf["inputs"]["rewind.dL"]["load_cells"]["lc9.T"]["zero"] is True
+    lm = data["linear_model"]
+    assert np.array(lm["A"]).shape == (len(lm["states"]),) * 2
+    assert np.array(lm["B"]).shape == (len(lm["states"]), len(lm["inputs"]))
     assert (tmp_path / "bode.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
