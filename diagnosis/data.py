@@ -488,7 +488,7 @@ def split_header(cell):
                 name, unit = p.group("name"), p.group("unit")
             except ValueError:
                 pass
-    unit = unit.strip() if unit is not None and unit.strip() else None
+    unit = unit.strip() if unit is not None and unit.strip() not in ("", "-", "--") else None  # [-]: no unit
     return name, unit
 
 
@@ -506,7 +506,8 @@ def _decimals(cells):
 def load_csv(path, *, time=None, time_unit=None, **kwargs):
     """Load a CSV file: a header row ``time, lc_unwind [lbf], v_line [ft/min], ...``
     then one row per sample. Lines starting with ``#`` before the header are skipped;
-    empty fields and ``nan`` are NaN. ``time``: the time column (name or header as
+    empty fields and ``nan`` are NaN. Comma-separated, or ``;`` / tab separated
+    with decimal commas allowed. ``time``: the time column (name or header as
     written; default: detected); ``time_unit``: its unit when the header gives none.
     Keyword arguments go to :func:`from_arrays`."""
     path = Path(path)
@@ -517,9 +518,14 @@ def load_csv(path, *, time=None, time_unit=None, **kwargs):
         raise DataError(path, None, f"cannot read ({exc.strerror})") from None
     except UnicodeDecodeError:
         raise DataError(path, None, "not a text (UTF-8) file") from None
-    rows = list(csv.reader(lines))
-    if not rows:
+    if not lines:
         raise DataError(path, None, "empty file")
+    # the delimiter the header uses most: ',' or, as European spreadsheets write, ';' (with
+    # decimal commas) or a tab
+    delim = max((",", ";", "\t"), key=lambda d: (lines[0].count(d), d == ","))
+    rows = list(csv.reader(lines, delimiter=delim))
+    if delim != ",":
+        rows = [rows[0]] + [[c.replace(",", ".") for c in r] for r in rows[1:]]
     names, units, headers = [], {}, {}
     for cell in rows[0]:
         try:

@@ -289,3 +289,24 @@ def test_diagnose_time_options_notes_and_bad_data(tmp_path, capsys):
     (tmp_path / "r.yaml").write_text("data: d.csv\n")
     code, _, err = run_cli(capsys, "diagnose", layout, tmp_path / "r.yaml", "--out", tmp_path / "o", "--quiet")
     assert code == 2 and "d.csv" in err and "'lc9.T'" in err and "samples 300-309 (t = 3 s to 3.09 s" in err
+
+
+def test_semicolon_csv_with_decimal_commas_and_dimensionless_unit(tmp_path):
+    path = tmp_path / "de.csv"
+    path.write_text("Zeit [ms];Kraft [N];Schlupf [-]\n" + "".join(f"{10 * k};{1.5 + k / 10:.1f}".replace(".", ",")
+                                                                  + ";0,5\n" for k in range(20)))
+    rec = load(path)
+    assert rec.dt == pytest.approx(0.01) and rec["Kraft"][3] == pytest.approx(1.8)
+    assert rec.units == {"Kraft": "N", "Schlupf": None} and rec["Schlupf"][0] == 0.5
+
+
+def test_mat_time_variable_by_option_and_name(tmp_path):
+    import scipy.io
+    k = np.arange(100)
+    scipy.io.savemat(tmp_path / "a.mat", {"clock": 4.0 * k, "x": np.sin(k / 10)})
+    rec = load(tmp_path / "a.mat", time="clock", time_unit="ms")
+    assert rec.dt == pytest.approx(4e-3) and list(rec.columns) == ["x"]
+    scipy.io.savemat(tmp_path / "b.mat", {"Timestamp_ms": 4.0 * k, "x": np.sin(k / 10)})
+    assert load(tmp_path / "b.mat").dt == pytest.approx(4e-3)  # name found, unit from its suffix
+    with pytest.raises(DataError, match="missing time column"):
+        load(tmp_path / "a.mat")
