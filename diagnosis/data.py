@@ -40,7 +40,8 @@ TIME_NAMES = ("time", "t")
 """Preferred names of the time column / variable (exact, then case-insensitive)."""
 
 # Other names a time column goes by (case-insensitive); an optional suffix is its unit.
-_TIME_LIKE = re.compile(r"^(?:time|t|timestamp|time[ _]?stamp|zeit|zeitstempel|elapsed(?:[ _]?time)?|datetime|date[ _]?time)"
+_TIME_LIKE = re.compile(r"^(?:time|t|timestamp|time[ _]?stamp|zeit|zeitstempel|elapsed(?:[ _]?time)?"
+                        r"|datetime|date[ _]?time)"
                         r"(?:[ _-]?(?P<unit>s|sec|ms|us|min|h))?$", re.IGNORECASE)
 MAX_NAN_RUN = 5
 """NaN runs of at most this many samples are interpolated; longer ones are refused."""
@@ -284,9 +285,9 @@ def from_arrays(time, columns, units=None, *, source="<arrays>", expect=None, ti
     Time must increase strictly (else the sample index is named). The grid is
     ``t0 + k * dt`` with dt the mean step (the median would be biased by stamps
     rounded to a coarse resolution: 300 Hz written in ms steps 3, 3, 4 ms), for
-    jittered stamps the least-squares line through them; a step further than ``time_tol`` * dt + resolution from dt is a gap or a rate
-    change and refused. When the steps vary by more than ``jitter_tol``
-    (std / mean) the channels are resampled onto the grid: linearly, except
+    jittered stamps the least-squares line through them; a step further than
+    ``time_tol`` * dt + resolution from dt is a gap or a rate change and refused.
+    When the steps vary by more than ``jitter_tol`` (std / mean) the channels are resampled onto the grid: linearly, except
     two-level (pulse) channels, which take the nearest sample so a pulse one
     sample wide keeps its full height. NaN runs of at most ``max_nan_run``
     samples are interpolated (on the recorded times, before any resampling);
@@ -358,7 +359,8 @@ def from_arrays(time, columns, units=None, *, source="<arrays>", expect=None, ti
     if missing:
         raise DataError(source, sorted(missing)[0], f"missing column (have: {', '.join(out) or 'none'})")
     if resampled:
-        notes.insert(0, f"time stamps jittered (step std/mean {jitter:.3g}; RMS {1e3 * np.sqrt(np.mean(off ** 2)):.3g} ms, "
+        rms = 1e3 * np.sqrt(np.mean(off ** 2))
+        notes.insert(0, f"time stamps jittered (step std/mean {jitter:.3g}; RMS {rms:.3g} ms, "
                         f"max {1e3 * np.max(np.abs(off)):.3g} ms from the uniform grid at {1 / dt:.6g} Hz): "
                         "resampled onto the grid, linearly"
                         + (f" (two-level channels {', '.join(map(repr, nearest))}: nearest sample)" if nearest else ""))

@@ -74,8 +74,8 @@ def pulse_edges(t, pulse, *, threshold=None, hysteresis=0.2, edge="auto"):
 
     ``edge``: "rising", "falling", or "auto" - the edge into the active level
     (:func:`pulse_levels`: rising for an active-high pulse, falling for an
-    active-low one; rising when there are fewer than two active-low pulses). A Schmitt trigger at ``threshold`` +/- ``hysteresis`` * span
-    (``threshold`` defaults to the midpoint between the two levels) finds each
+    active-low one; rising when there are fewer than two active-low pulses).
+    A Schmitt trigger at ``threshold`` +/- ``hysteresis`` * span (``threshold`` defaults to the midpoint between the two levels) finds each
     edge; its time is where the signal crosses ``threshold``, linearly
     interpolated between the two samples around it. Missing (NaN) samples are
     bridged by linear interpolation first.
