@@ -296,3 +296,31 @@ def test_cosimulation_matches_reference_with_every_form_on():
     print({k: f"{v:.3g}" for k, v in run["rel_rms"].items()})
     assert run["status"] == "ok", run["message"]
     assert run["worst"] < 5e-3, run["rel_rms"]
+
+
+# ---- the new FMU variables in a foreign master -------------------------------------------------
+def test_forms_step_in_libcosim(fmus):
+    """DampedSpan, a lagged SpeedPI with acceleration feed-forward and a second-order LoadCell in
+    libcosim (1 ms steps, 20 of them), against their analytic responses."""
+    pytest.importorskip("libcosimpy")
+    from test_libcosim import Cosim
+    d, EA, L0, v_out = 0.01, 2.0e4, 0.5, 1.01
+    tc, w_c, zeta = 0.01, 100.0, 0.707
+    sim = Cosim(fmus, {
+        # {21} from T0 = 0: T_e = T_ss (1 - e^{-v_out t/L0}); T = T_e + d dT_e/dt
+        "s": ("DampedSpan", {"EA": EA, "L0": L0, "T0": 0.0, "v_in": 1.0, "v_out": v_out, "damping_time": d}),
+        # e = v_ref/R = 10 rad/s held (omega = 0): command A + B t with A = K_p e + J a_ref/R =
+        # 0.5*10*10 + 0.5*2/0.1 = 60, B = K_p w_ld e = 5*2.5*10 = 125; lag from tau0 = 0
+        "pi": ("SpeedPI", {"K_ref": 10.0, "zeta": 1.0, "v_ref": 1.0, "R": 0.1, "J": 0.5, "a_ref": 2.0,
+                           "acc_ff": 1, "tau_current": tc}),
+        "lc": ("LoadCell", {"T_in": 100.0, "T_out": 100.0, "tau_filter": 1.0 / w_c, "filter_order": 2,
+                            "filter_damping": zeta}),
+    })
+    data = sim.run(20, {"s": ["T"], "pi": ["tau"], "lc": ["T"]})
+    t = 20e-3
+    T_ss = EA * (v_out - 1.0) / v_out
+    T_e = T_ss * (1 - math.exp(-v_out * t / L0))
+    assert data["s.T"][-1] == pytest.approx(T_e + d * T_ss * v_out / L0 * math.exp(-v_out * t / L0), rel=1e-8)
+    lag = 1 - math.exp(-t / tc)
+    assert data["pi.tau"][-1] == pytest.approx(60.0 * lag + 125.0 * (t - tc * lag), rel=1e-6)
+    assert data["lc.T"][-1] == pytest.approx(100.0 * second_order_step_response(t, w_c, zeta), rel=1e-5)
