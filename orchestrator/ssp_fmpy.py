@@ -1,6 +1,6 @@
 """Run an SSP written by ``webline export-ssp`` with fmpy alone (fmpy, numpy, the standard library).
 
-fmpy's own runner, ``fmpy.ssp.simulation.simulate_ssp`` (0.3.32, unchanged upstream),
+fmpy's own runner, ``fmpy.ssp.simulation.simulate_ssp`` (0.3.32),
 cannot run a webline line; docs/fmus-in-other-tools.md shows why (it matches
 parameters to components by bare name prefix, and it starts every connected
 input at 0.0, so the speed loops' first step sees a roll radius and inertia of

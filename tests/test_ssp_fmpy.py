@@ -101,6 +101,24 @@ def test_fmpy_simulate_ssp_starts_every_connected_input_at_zero(ewl_ssp, step, m
     assert bound[f"{failed.name}.R"] > 0 and bound[f"{failed.name}.J"] > 0  # what the SSD binds
 
 
+def test_fmpy_simulate_ssp_without_parameters_fails_in_the_first_step(ewl_ssp, monkeypatch):
+    """The plain call (no parameter set): the first speed loop discards its first step."""
+    import fmpy.ssp.simulation as S
+    from fmpy.fmi1 import FMICallException
+    seen = {}
+    do_step = S.do_step
+
+    def recording_do_step(component, time, step_size):
+        seen.update(name=component.name, time=time)
+        do_step(component, time, step_size)
+
+    monkeypatch.setattr(S, "do_step", recording_do_step)
+    with pytest.raises(FMICallException) as exc:
+        S.simulate_ssp(str(ewl_ssp[1]), stop_time=0.01, step_size=1e-3)
+    assert exc.value.function == "fmi2DoStep" and exc.value.status == 2
+    assert seen == {"name": "unwind_speed_pi", "time": 0.0}
+
+
 def _max_rel(a, b):
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
 
