@@ -185,6 +185,14 @@ def main(argv=None):
     if args.rescore:
         summary, results, meta = rescore(args.out, args.results)
     else:
+        from webline.diagnosis import benchmark as B
+        if not B.EWL.is_file():
+            # an installed webline (a wheel) ships the package, not the repository's scenarios/
+            print(f"webline diagnose-bench: needs a source checkout of webline: the benchmark line is "
+                  f"derived from scenarios/ewl.yaml of the repository, not found at {B.EWL} (an installed "
+                  f"wheel has no scenarios/); run it in a clone: python -m webline.cli diagnose-bench",
+                  file=sys.stderr)
+            return 2
         summary, results, meta = run(n, args.seed, args.out, args.quick, args.jobs, args.timeout, args.only)
     path = args.results or (args.out / "diagnosis_results.json")
     md = write(summary, results, meta, path)
