@@ -58,7 +58,7 @@ def _skip_unless_pip_reaches_packages(tmp):
     failing build or install is a failure of the project, not a skip."""
     if "probe" not in _PROBE:  # once per session: a skipped fixture is set up again for every test
         p = subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "-d", str(tmp / "probe"),
-                            "setuptools>=68"], cwd=tmp, env=_clean_env(), capture_output=True, text=True,
+                            "setuptools>=77"], cwd=tmp, env=_clean_env(), capture_output=True, text=True,
                            timeout=600)
         text = p.stdout + p.stderr
         _PROBE["probe"] = text[-800:] if p.returncode != 0 and _UNREACHABLE.search(text) else None
