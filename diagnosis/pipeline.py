@@ -173,6 +173,11 @@ class Diagnosis:
                     raise DiagnoseError(f"{p}: the layout rejects the run's conditions: {exc}") from None
                 except (ValueError, KeyError) as exc:
                     raise DiagnoseError(f"{p}: the layout rejects the run's conditions: {exc}") from None
+                from webline.orchestrator.memory import ResultTooLarge, check_result_memory
+                try:
+                    check_result_memory(system)  # the run's simulation must fit, before any starts
+                except ResultTooLarge as exc:
+                    raise DiagnoseError(f"{p}: experiment.duration: {exc}") from None
                 ctx = RunCtx(run, fit)
                 ctx.fs = run.fs
                 ctx.sensors = self._match_sensors(system, run, p)

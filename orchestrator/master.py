@@ -680,6 +680,9 @@ def simulate(system, fmu_paths=None, progress=True):
     check_system(system, models)
     slaves = [Slave(c, models[c.model], i) for i, c in enumerate(system.components)]
     plan = plan_coupling(slaves, system.connections)
+    # refuse a run whose results cannot fit in memory before any FMU is instantiated
+    from webline.orchestrator.memory import check_result_memory
+    check_result_memory(system, columns=len(plan.columns))
 
     e = system.experiment
     h, t0 = float(e.step), float(e.start)

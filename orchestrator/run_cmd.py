@@ -69,17 +69,27 @@ def summary(result):
     return "\n".join(lines)
 
 
+def _too_large(layout, exc):
+    """``file:line: experiment.duration: reason`` for a run whose results cannot fit in memory."""
+    from webline.orchestrator.layout_source import Issue, Location, locate
+    data = getattr(layout, "_data", None)
+    where = locate(data, ["experiment", "duration"])[0] if data else Location(str(getattr(layout, "_file", "")))
+    return str(Issue(where, exc.field, str(exc)))
+
+
 def main(argv=None):
     args = parser().parse_args(argv)
     from webline.orchestrator.master import SetupError, simulate
 
     try:
-        from webline.orchestrator.layout import LayoutError, load_system
+        from webline.orchestrator.layout import LayoutError, build_system, load_layout
+        from webline.orchestrator.memory import ResultTooLarge, check_result_memory
     except ImportError as exc:
         print(f"webline run: the layout module is not available ({exc})", file=sys.stderr)
         return 2
     try:
-        system = load_system(args.layout, _overrides(args.set))
+        layout = load_layout(args.layout, _overrides(args.set))
+        system = build_system(layout)
         if args.algorithm:
             system.experiment.algorithm = args.algorithm
         if args.step is not None:
@@ -90,6 +100,10 @@ def main(argv=None):
                 raise ValueError(str(exc)) from None
             if not system.experiment.step > 0:
                 raise ValueError(f"--step must be > 0 (got {args.step!r})")
+        check_result_memory(system)  # before the FMUs are built or anything runs
+    except ResultTooLarge as exc:
+        print(f"webline run: {_too_large(layout, exc)}", file=sys.stderr)
+        return 2
     except (LayoutError, ValueError) as exc:
         print(f"webline run: {exc}", file=sys.stderr)
         return 2
@@ -97,6 +111,9 @@ def main(argv=None):
     out = args.out or Path("out") / args.layout.stem
     try:
         result = simulate(system, progress=not args.no_progress)
+    except ResultTooLarge as exc:  # the master's own count of the columns
+        print(f"webline run: {_too_large(layout, exc)}", file=sys.stderr)
+        return 2
     except SetupError as exc:
         print(f"webline run: {args.layout}: {exc}", file=sys.stderr)
         return 2

@@ -387,9 +387,16 @@ def validate_overrides(sweep, limit=200):
     starts: a dotted key or value the layout rejects is a :class:`SweepError` naming the
     sweep file and the field."""
     from webline.orchestrator.layout import LayoutError, load_system
+    from webline.orchestrator.memory import ResultTooLarge, check_result_memory
     for run in sweep.runs[:limit]:
         try:
-            load_system(sweep.layout, dict(run.overrides))
+            check_result_memory(load_system(sweep.layout, dict(run.overrides)))
+        except ResultTooLarge as exc:
+            hit = [k for k in run.overrides if k.startswith("experiment.")]
+            k = max(hit, key=len) if hit else None
+            where = (f"set.{k}" if k in sweep.fixed else f"{sweep.mode}.{k}") if k else sweep.mode
+            values = ", ".join(f"{a}={b}" for a, b in run.swept.items())
+            raise SweepError(sweep.path, where, f"run {run.run_id} ({values}): {exc}") from None
         except LayoutError as exc:
             text = str(exc)
             hit = [k for k in run.overrides if k in text]

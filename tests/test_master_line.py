@@ -82,7 +82,9 @@ def test_line_keeps_speed_and_matches_reference(runs, reference, algorithm, tol)
     assert np.array_equal(r.time, reference.time)
     for c in ("s1.T", "s2.T", "lc.T"):
         assert np.abs(r[c] - reference[c]).max() < tol, c
-    assert np.abs(r["r.v"] - reference["r.v"]).max() < tol * 1e-3
+    # idler mode (roller J/R^2 between two springs EA/L): a tension error tol goes with a speed
+    # error tol sqrt(2 L/(EA J/R^2)) = 4.2e-3 tol m/s (was tol 1e-3, not derived: Jacobi used 88 %)
+    assert np.abs(r["r.v"] - reference["r.v"]).max() < tol * math.sqrt(2.0 * L / (EA * J / R ** 2))
 
 
 def test_feed_through_is_resolved_at_every_communication_point(runs):
