@@ -50,8 +50,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-REPO = Path(__file__).resolve().parent.parent
-EWL = REPO / "scenarios" / "ewl.yaml"
+REPO = Path(__file__).resolve().parent.parent  # the checkout's root (installed: the webline package folder)
+EWL = REPO / "scenarios" / "ewl.yaml"           # source checkouts only: a wheel ships no scenarios/
 KEEP = ("unwind", "idler_u1", "guide_in", "roller9", "sw_leader", "idler_r1", "roller19", "rewind")
 PERIODIC = ("eccentricity", "out_of_round")
 DRIVE_KINDS = ("backlash", "compliance")
@@ -491,7 +491,8 @@ def run_diagnosis(truth, out, timeout=1800, python=None, extra=()):
     blind = Path(truth["blind_folder"])
     argv = diagnose_argv(blind, out, holdout_names(truth), python, extra)
     env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    if (REPO / "pyproject.toml").is_file():  # a source checkout; never an installed package's own folder
+        env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     t0 = time.perf_counter()
     cpu0 = _children_cpu()
     try:

@@ -252,6 +252,15 @@ def main(argv=None):
     if n < 1 or args.jobs < 1:
         print("webline diagnose-bench: --cases and --jobs must be >= 1", file=sys.stderr)
         return 2
+    if not args.rescore:
+        from webline.diagnosis import benchmark as B
+        if not B.EWL.is_file():
+            # an installed webline (a wheel) ships the package, not the repository's scenarios/
+            print(f"webline diagnose-bench: needs a source checkout of webline: the benchmark line is "
+                  f"derived from scenarios/ewl.yaml of the repository, not found at {B.EWL} (an installed "
+                  f"wheel has no scenarios/); run it in a clone: python -m webline.cli diagnose-bench",
+                  file=sys.stderr)
+            return 2
     fams = ("own", "independent") if args.family == "both" else (args.family,)
     families = {}
     for fam in fams:

@@ -19,7 +19,7 @@ KINDS = ("eccentricity", "out_of_round", "backlash", "compliance", "sensor", "pa
 
 # global parameter candidates: name -> (component models, FMI parameter names)
 PARAMETERS = {
-    "EA": (("Span",), ("EA",)),
+    "EA": (("Span", "DampedSpan"), ("EA",)),
     "friction": (("UnwindRoll", "RewindRoll", "IdleRoller", "DrivenRoller"), ("b",)),
     "inertia": (("UnwindRoll", "RewindRoll", "IdleRoller", "DrivenRoller"), ("J", "J_core")),
     "tension_gain": (("TensionPI",), ("K",)),

@@ -30,6 +30,7 @@ import scipy.ndimage
 import scipy.optimize
 from numpy.polynomial import legendre
 
+from webline.diagnosis.data import two_levels
 from webline.diagnosis.spectra import amplitude_spectrum
 
 TACH_KINDS = ("angle", "pulse", "speed")
@@ -49,22 +50,62 @@ def angle_from_speed(t, omega, theta0=0.0):
     return theta0 + scipy.integrate.cumulative_trapezoid(np.asarray(omega, dtype=float), t, initial=0.0)
 
 
-def pulse_edges(t, pulse, *, threshold=None, hysteresis=0.2):
-    """Times (s) of the rising edges of a pulse channel, to a fraction of a sample.
+def pulse_levels(x):
+    """(threshold, span, active_high) of a pulse channel: the two levels of
+    :func:`diagnosis.data.two_levels` when the signal has them (any offset, a
+    pulse of any width), else the 1st-99th percentile range. The active level is
+    the one the signal spends less time at: a pulse that idles near 0 V and drops
+    to -6.5 V once a revolution is active-low. NaN samples are ignored."""
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return 0.0, 0.0, True
+    levels = two_levels(x)
+    if levels is not None:
+        low, high, mid = levels
+    else:
+        low, high = np.percentile(x, [1, 99])
+        mid = 0.5 * (low + high)
+    return float(mid), float(high - low), bool(np.mean(x > mid) <= 0.5)
 
-    A Schmitt trigger at ``threshold`` +/- ``hysteresis`` * range (``threshold``
-    defaults to the middle of the 1st-99th percentile range) finds each edge;
-    its time is where the signal crosses ``threshold``, linearly interpolated
-    between the two samples around it.
+
+def pulse_edges(t, pulse, *, threshold=None, hysteresis=0.2, edge="auto"):
+    """Times (s) of the leading edges of a pulse channel, to a fraction of a sample.
+
+    ``edge``: "rising", "falling", or "auto" - the edge into the active level
+    (:func:`pulse_levels`: rising for an active-high pulse, falling for an
+    active-low one; rising when there are fewer than two active-low pulses).
+    A Schmitt trigger at ``threshold`` +/- ``hysteresis`` * span (``threshold`` defaults to the midpoint between the two levels) finds each
+    edge; its time is where the signal crosses ``threshold``, linearly
+    interpolated between the two samples around it. Missing (NaN) samples are
+    bridged by linear interpolation first.
     """
     t = np.asarray(t, dtype=float)
     x = np.asarray(pulse, dtype=float)
-    lo, hi = np.percentile(x, [1, 99])
-    span = hi - lo
+    good = np.isfinite(x)
+    if not good.any():
+        return np.empty(0)
+    if not good.all():
+        x = x.copy()
+        x[~good] = np.interp(t[~good], t[good], x[good])
+    mid, span, active_high = pulse_levels(x)
     if not span > 0:
         return np.empty(0)
-    mid = 0.5 * (lo + hi) if threshold is None else float(threshold)
-    state = np.where(x > mid + hysteresis * span, 1.0, np.where(x < mid - hysteresis * span, 0.0, np.nan))
+    mid = mid if threshold is None else float(threshold)
+    if edge not in ("auto", "rising", "falling"):
+        raise ValueError(f"edge must be rising, falling or auto, not {edge!r}")
+    if edge == "auto":
+        falling = _rising_edges(t, -x, -mid, hysteresis * span) if not active_high else np.empty(0)
+        # a single step has no polarity: rising unless the record shows active-low pulses
+        return falling if len(falling) >= 2 else _rising_edges(t, x, mid, hysteresis * span)
+    if edge == "falling":
+        return _rising_edges(t, -x, -mid, hysteresis * span)  # falling edges of x are rising edges of -x
+    return _rising_edges(t, x, mid, hysteresis * span)
+
+
+def _rising_edges(t, x, mid, band):
+    """Rising crossings of ``mid`` by ``x`` with a Schmitt band +/- ``band``, interpolated in ``t``."""
+    state = np.where(x > mid + band, 1.0, np.where(x < mid - band, 0.0, np.nan))
     known = np.flatnonzero(np.isfinite(state))
     if known.size == 0:
         return np.empty(0)
@@ -86,7 +127,8 @@ def pulse_edges(t, pulse, *, threshold=None, hysteresis=0.2):
 def angle_from_pulses(t, pulse, *, threshold=None, smooth=True, max_period_jump=0.6):
     """Shaft angle (rad) from a once-per-revolution pulse channel.
 
-    Rising edge k (:func:`pulse_edges`) is at angle 2 pi k (k = 0 at the first
+    Leading edge k (:func:`pulse_edges`: rising for an active-high pulse,
+    falling for an active-low one) is at angle 2 pi k (k = 0 at the first
     edge). Between edges the angle follows a smoothing spline of (edge time,
     2 pi k), whose smoothing (chosen by generalised cross-validation) averages
     out the sampling jitter of the edge times; ``smooth=False`` interpolates
@@ -99,7 +141,7 @@ def angle_from_pulses(t, pulse, *, threshold=None, smooth=True, max_period_jump=
     t = np.asarray(t, dtype=float)
     edges = pulse_edges(t, pulse, threshold=threshold)
     if len(edges) < 4:
-        raise ValueError(f"found {len(edges)} rising pulse edges; need at least 4 (one pulse per revolution)")
+        raise ValueError(f"found {len(edges)} pulse edges; need at least 4 (one pulse per revolution)")
     periods = np.diff(edges)
     if len(periods) >= 3:
         ref = scipy.ndimage.median_filter(periods, size=5, mode="nearest")
@@ -129,28 +171,35 @@ def detect_tach_kind(x, unit=None):
     """Guess what a tachometer channel holds: "angle", "pulse" or "speed".
 
     A unit decides when it can (SI strings as :mod:`diagnosis.data` gives them):
-    rad -> angle, rad/s or Hz -> speed. Otherwise the shape decides: a signal
-    that sits at two levels with rising edges is a pulse train; one that moves
-    one way (with wrap-arounds) is an angle; anything else a speed.
+    rad -> angle, rad/s or Hz -> speed. Otherwise the shape decides, on the
+    finite samples: a signal at two levels (:func:`diagnosis.data.two_levels`:
+    either polarity, any offset, pulses as narrow as one sample) with at least
+    four leading edges, a few samples or more apart on average, is a pulse
+    train; one that moves one way (with wrap-arounds) is an angle; anything
+    else a speed.
     """
     if unit == "rad":
         return "angle"
     if unit in ("rad/s", "Hz"):
         return "speed"
     x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 8:
+        return "speed"
+    if two_levels(x) is not None:
+        edges = pulse_edges(np.arange(len(x), dtype=float), x)
+        if len(edges) >= 4 and len(x) / len(edges) >= 4:  # transitions rare: not a fast square wave
+            return "pulse"
     lo, hi = np.percentile(x, [1, 99])
     span = hi - lo
     if not span > 0:
         return "speed"
-    at_levels = np.mean((x < lo + 0.2 * span) | (x > hi - 0.2 * span))
     steps = np.diff(x)
     wraps = np.abs(steps) > 0.5 * span
     small = steps[~wraps]
     one_way = small.size and max(np.mean(small > 0), np.mean(small < 0)) > 0.9
     if one_way and (wraps.sum() > 0 or span > TWO_PI):
         return "angle"
-    if at_levels > 0.95 and len(pulse_edges(np.arange(len(x)), x)) >= 2:
-        return "pulse"
     return "speed"
 
 

@@ -2,7 +2,7 @@
 
     webline orders DATA --signal COL --tach NAME=COL [--tach NAME=COL ...]
                    [--kind [NAME=]KIND ...] [--orders N] [--max-harmonic N]
-                   [--max-order N] [--alpha P] [--out DIR]
+                   [--max-order N] [--alpha P] [--time COL] [--time-unit U] [--out DIR]
 
 For each named shaft the tach channel gives its angle (KIND: pulse, angle,
 speed, model - an angle from a simulation, refined from the signal - or
@@ -11,6 +11,10 @@ peaks, each tagged as harmonic j of one shaft or as ambiguous when several
 shafts' harmonics fall within the record's resolution. Each shaft's harmonics
 are fitted against its angle (all shafts jointly) and its order spectrum taken.
 Prints a table; with --out writes ``orders.json`` and ``orders.png``.
+Columns are named as in the header, with or without the unit (``Force`` or
+``"Force [N]"``). The time column is detected (time, t, Timestamp, time_s,
+``Time [s]``, date-time strings) or named with --time; jittered stamps are
+resampled and short gaps filled, each reported as a note.
 
 Exit codes: 0 ok, 2 bad data or arguments.
 """
@@ -48,6 +52,8 @@ def _parser():
     p.add_argument("--max-order", type=float, default=12, help="order spectra up to this order (default 12)")
     p.add_argument("--alpha", type=float, default=0.01,
                    help="false-alarm probability of the peak search (default 0.01)")
+    p.add_argument("--time", metavar="COL", help="the time column (default: detected by name or date-time values)")
+    p.add_argument("--time-unit", metavar="UNIT", help="unit of the time column when its header gives none (e.g. ms)")
     p.add_argument("--out", type=Path, help="folder for orders.json and orders.png")
     return p
 
@@ -84,8 +90,10 @@ def analyse(record, signal, tachs, kinds, *, n_orders=6, max_harmonic=10, max_or
     shaft -> column; ``kinds``: shaft -> kind. Raises ``UsageError`` / ``ValueError``
     on data that cannot be analysed."""
     for col in [signal, *tachs.values()]:
-        if col not in record:
+        if record.resolve(col) is None:
             raise UsageError(f"no column {col!r} in {record.source} (have: {', '.join(record.columns)})")
+    signal = record.resolve(signal)
+    tachs = {name: record.resolve(col) for name, col in tachs.items()}
     t, x = record.time, record[signal]
     thetas, shafts = {}, {}
     for name, col in tachs.items():
@@ -131,6 +139,7 @@ def analyse(record, signal, tachs, kinds, *, n_orders=6, max_harmonic=10, max_or
         "phase_convention": "component = amplitude * sin(order * theta + phase_rad)",
         "explained_total": float(1.0 - np.var(any_fit.residual) / detrended) if detrended > 0 else 0.0,
         "shafts": shafts,
+        "notes": list(record.notes),
         "peaks": [{"frequency_hz": float(fr), "amplitude": float(a), "snr": float(s), "status": tag.status,
                    "family": tag.family, "harmonic": tag.harmonic,
                    "candidates": [{"family": n, "harmonic": j, "order_amplitude": _order_amplitude(shafts[n], j)}
@@ -170,6 +179,8 @@ def format_table(result):
         fr = s["frequency_hz"]
         lines.append(f"{name:<12} {s['column']:<16} {s['kind']:<7} {fr['mean']:>11.4f} {fr['spread']:>8.4f} "
                      f"{s['explained']:>9.1%}")
+    if result.get("notes"):
+        lines += [""] + [f"note: {n}" for n in result["notes"]]
     lines += ["", f"peaks significant at alpha = {result['alpha']:g} ({len(result['peaks'])}):",
               f"{'f [Hz]':>9} {'amplitude':>10} {'SNR':>7}  tag"]
     for p in result["peaks"]:
@@ -234,7 +245,7 @@ def main(argv=None):
         kinds = _kinds(args.kind, list(tachs))
         if args.orders < 1 or args.max_harmonic < 1 or not 0 < args.alpha < 1:
             raise UsageError("--orders and --max-harmonic must be >= 1, --alpha in (0, 1)")
-        record = load(args.data)
+        record = load(args.data, time=args.time, time_unit=args.time_unit)
         result = analyse(record, args.signal, tachs, kinds, n_orders=args.orders,
                          max_harmonic=args.max_harmonic, max_order=args.max_order, alpha=args.alpha)
     except (DataError, ValueError) as exc:  # UsageError is a ValueError

@@ -62,6 +62,8 @@ class Options:
     fmu_paths: dict = None
     progress: bool = False
     jobs: int = 1                    # simulations in parallel (worker processes)
+    time_column: str = None          # data time column for runs that do not name one (None: detected)
+    time_unit: str = None            # its unit when the header gives none
 
 
 class DiagnoseError(ValueError):
@@ -156,9 +158,12 @@ class Diagnosis:
         for paths, fit in ((self.run_paths, True), (self.holdout_paths, False)):
             for p in paths:
                 try:
-                    run = load_run(p, holdout=not fit)
+                    run = load_run(p, holdout=not fit, time=self.opt.time_column, time_unit=self.opt.time_unit)
                 except RunError as exc:
                     raise DiagnoseError(str(exc)) from None
+                self.notes += [f"run {run.name}: {n}" for n in run.notes]
+                for n in run.notes:
+                    log.info("  run %s: %s", run.name, n)
                 if run.name in names:
                     run.name = f"{run.name}_{len(names)}"
                 names.add(run.name)

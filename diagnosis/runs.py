@@ -13,15 +13,17 @@ A run file (YAML)::
       path.unwind.friction: 4e-3 N*m*s/rad
     time_offset: 0 s            # optional: model time of the first sample
     sensors: {tension9: lc9.T}  # optional: data column -> model column
+    time: Timestamp             # optional: the time column (default: detected)
+    time_unit: ms               # optional: its unit when the header gives none
 
 The experiment keys may also stand at the top level (``line_speed: ...``).
 
-Data columns are ``time`` and ``<component>.<variable>`` (units in the
+Data columns are a time column (``time``, ``Timestamp``, ``Time [s]``, date-time
+strings, ...: see :mod:`diagnosis.data`) and ``<component>.<variable>`` (units in the
 header, converted to SI by :mod:`diagnosis.data`), e.g. ``lc9.T [lbf]``;
 ``<element>.pulse`` / ``<element>.angle`` columns, when present, give the
 true angle of a rotating element.
 """
-import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -45,6 +47,7 @@ class Run:
     units: dict = field(default_factory=dict)
     holdout: bool = False
     time_offset: float = 0.0
+    notes: list = field(default_factory=list)  # what loading did to the data (resampling, gaps filled)
 
     @property
     def fs(self):
@@ -95,11 +98,14 @@ def _seconds(text, path, key):
     return float(m.group(1)) * {"s": 1.0, None: 1.0, "ms": 1e-3, "min": 60.0}[m.group(2)]
 
 
-RESERVED = {"data", "name", "experiment", "overrides", "time_offset", "sensors", "notes", "description"}
+RESERVED = {"data", "name", "experiment", "overrides", "time_offset", "sensors", "notes", "description",
+            "time", "time_unit"}
 
 
-def load_run(path, holdout=False):
-    """Read a run file and its data; raises :class:`RunError` naming the file."""
+def load_run(path, holdout=False, *, time=None, time_unit=None):
+    """Read a run file and its data; raises :class:`RunError` naming the file.
+    ``time`` / ``time_unit``: the time column and its unit for runs whose file
+    does not say (``time:`` / ``time_unit:`` in the run file win)."""
     path = Path(path)
     try:
         spec = yaml.safe_load(path.read_text())
@@ -132,139 +138,52 @@ def load_run(path, holdout=False):
             overrides[str(k)] = _value(v)
         else:
             raise RunError(f"{path}: unknown key {k!r} (run files have data, name, experiment, overrides, "
-                           f"time_offset, sensors, or the experiment keys {', '.join(EXPERIMENT_KEYS)})")
+                           f"time_offset, sensors, time, time_unit, or the experiment keys "
+                           f"{', '.join(EXPERIMENT_KEYS)})")
     offset = _seconds(spec.get("time_offset"), path, "time_offset")
-    t, cols, units = read_data(data_path)
+    for key in ("time", "time_unit"):
+        if key in spec and not isinstance(spec[key], str):
+            raise RunError(f"{path}: {key}: expected a column name / unit as text (got {spec[key]!r})")
+    rec = read_record(data_path, time=spec.get("time", time), time_unit=spec.get("time_unit", time_unit))
+    t, cols, units = rec.time, dict(rec.columns), dict(rec.units)
     rename = spec.get("sensors") or {}
     for src, dst in rename.items():
-        if src not in cols:
+        col = rec.resolve(str(src))
+        if col is None or col not in cols:
             raise RunError(f"{path}: sensors: column {src!r} is not in {data_path.name}")
-        cols[dst] = cols.pop(src)
+        cols[dst] = cols.pop(col)
+        units[dst] = units.pop(col, None)
     t = t - t[0] + offset
     return Run(name=str(spec.get("name") or path.stem), path=path, data_path=data_path,
                overrides=overrides, t=t, columns=cols, units=units, holdout=holdout,
-               time_offset=offset)
+               time_offset=offset, notes=[f"{data_path.name}: {n}" for n in rec.notes])
 
 
 # ------------------------------------------------------------------- data ----
-def read_data(path):
-    """(t, {column: SI array}, {column: unit}) on a uniform time grid.
+MIN_SAMPLES, MIN_DURATION = 16, 2.0
 
-    Uses :mod:`diagnosis.data` for CSV/.mat with units in the headers; checks
-    what the diagnosis needs: a time column, increasing times, finite values,
-    at least 2 s of data."""
+
+def read_record(path, *, time=None, time_unit=None):
+    """The run's data as a :class:`diagnosis.data.Record` (uniform time grid, SI,
+    short gaps filled, jitter resampled; see ``Record.notes``), checked for what
+    the diagnosis needs: at least 16 samples and 2 s. Raises :class:`RunError`
+    naming the file, the column and the reason."""
+    from webline.diagnosis.data import DataError, load
     path = Path(path)
     try:
-        t, cols, units = _load_with_data_module(path)
-    except RunError:
-        raise
-    except Exception as exc:  # the loader's own error type, or a parse failure
-        raise RunError(f"{path}: {exc}") from None
-    t = np.asarray(t, float)
-    if t.ndim != 1 or len(t) < 16:
-        raise RunError(f"{path}: too few samples ({len(t)})")
-    if not np.all(np.isfinite(t)):
-        raise RunError(f"{path}: the time column has non-finite values")
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        k = int(np.argmax(dt <= 0))
-        raise RunError(f"{path}: time must increase (row {k + 2}: {t[k + 1]!r} after {t[k]!r})")
-    out = {}
-    for name, y in cols.items():
-        y = np.asarray(y, float)
-        if y.shape != t.shape:
-            raise RunError(f"{path}: column {name!r} has {y.size} values for {t.size} times")
-        bad = ~np.isfinite(y)
-        if bad.all():
-            raise RunError(f"{path}: column {name!r} has no finite value")
-        if bad.mean() > 0.05:
-            raise RunError(f"{path}: column {name!r} has {bad.sum()} non-finite values "
-                           f"({100 * bad.mean():.0f} %)")
-        if bad.any():  # isolated dropouts: interpolate
-            y = y.copy()
-            y[bad] = np.interp(t[bad], t[~bad], y[~bad])
-        out[name] = y
-    if t[-1] - t[0] < 2.0:
-        raise RunError(f"{path}: only {t[-1] - t[0]:.3g} s of data; the diagnosis needs at least 2 s")
-    # uniform grid at the median step (logs are often slightly jittered)
-    step = float(np.median(dt))
-    if np.max(np.abs(dt - step)) > 1e-3 * step:
-        n = int(math.floor((t[-1] - t[0]) / step)) + 1
-        tu = t[0] + step * np.arange(n)
-        out = {k: np.interp(tu, t, v) for k, v in out.items()}
-        t = tu
-    return t, out, units
+        rec = load(path, time=time, time_unit=time_unit, min_samples=MIN_SAMPLES)
+    except DataError as exc:
+        raise RunError(str(exc)) from None
+    if rec.time[-1] - rec.time[0] < MIN_DURATION:
+        raise RunError(f"{path}: only {rec.time[-1] - rec.time[0]:.3g} s of data; the diagnosis needs at least "
+                       f"{MIN_DURATION:g} s")
+    return rec
 
 
-def _load_with_data_module(path):
-    """Load through diagnosis.data if it is there, else a plain CSV reader."""
-    try:
-        from webline.diagnosis import data as data_mod
-    except ImportError:
-        data_mod = None
-    if data_mod is not None:
-        for name in ("load", "load_data", "read", "read_data", "load_measurements"):
-            fn = getattr(data_mod, name, None)
-            if callable(fn):
-                return _normalise(fn(path))
-    if path.suffix.lower() == ".mat":
-        raise RunError(f"{path}: .mat data needs diagnosis.data")
-    return _read_csv(path)
-
-
-def _normalise(obj):
-    """(t, cols, units) from whatever the data module returns."""
-    if isinstance(obj, tuple) and len(obj) >= 2:
-        t, cols = obj[0], obj[1]
-        units = obj[2] if len(obj) > 2 and isinstance(obj[2], dict) else {}
-        return np.asarray(t, float), dict(cols), units
-    t = getattr(obj, "time", None)
-    if t is None:
-        t = getattr(obj, "t")
-    cols = getattr(obj, "columns", None)
-    if cols is None:
-        cols = getattr(obj, "data")
-    if not isinstance(cols, dict):
-        cols = {k: obj[k] for k in cols}
-    units = getattr(obj, "units", {}) or {}
-    return np.asarray(t, float), {k: np.asarray(v, float) for k, v in cols.items() if k not in ("time", "t")}, dict(units)
-
-
-_UNIT = {"s": 1.0, "ms": 1e-3, "N": 1.0, "kN": 1e3, "lbf": 4.4482216152605, "m": 1.0, "mm": 1e-3,
-         "in": 0.0254, "ft": 0.3048, "rad": 1.0, "deg": math.pi / 180, "m/s": 1.0,
-         "ft/min": 0.00508, "rad/s": 1.0, "rpm": 2 * math.pi / 60, "1": 1.0, "": 1.0}
-
-
-def _read_csv(path):
-    import csv
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
-    if not rows:
-        raise RunError(f"{path}: empty file")
-    names, units = [], {}
-    for h in rows[0]:
-        m = re.fullmatch(r"\s*([^\[\(]+?)\s*(?:[\[\(]\s*([^\]\)]*)\s*[\]\)])?\s*", h)
-        if not m:
-            raise RunError(f"{path}: cannot read header {h!r}")
-        names.append(m.group(1))
-        units[m.group(1)] = (m.group(2) or "").strip()
-    try:
-        data = np.array([[float(x) for x in r] for r in rows[1:] if r], float)
-    except ValueError as exc:
-        raise RunError(f"{path}: non-numeric value: {exc}") from None
-    if data.ndim != 2 or data.shape[1] != len(names):
-        raise RunError(f"{path}: rows do not match the header ({len(names)} columns)")
-    tname = next((n for n in names if n.lower() in ("time", "t")), None)
-    if tname is None:
-        raise RunError(f"{path}: no 'time' column (header: {', '.join(names)})")
-    cols = {}
-    for i, n in enumerate(names):
-        u = units[n]
-        if u not in _UNIT:
-            raise RunError(f"{path}: column {n!r}: unknown unit {u!r}")
-        cols[n] = data[:, i] * _UNIT[u]
-    t = cols.pop(tname)
-    return t, cols, units
+def read_data(path, *, time=None, time_unit=None):
+    """(t, {column: SI array}, {column: SI unit}) on a uniform time grid (:func:`read_record`)."""
+    rec = read_record(path, time=time, time_unit=time_unit)
+    return rec.time, dict(rec.columns), dict(rec.units)
 
 
 def write_csv(path, t, columns, units=None):

@@ -14,12 +14,13 @@ if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "
     for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
         del sys.modules[_name]
 
-from webline.fmi_slave import ElementSlave, Var, finite, non_negative, tension_rate_input
+from webline.fmi_slave import ElementSlave, Var, choice, finite, non_negative, positive, tension_rate_input
 from webline.physics.load_cell import LoadCellModel
 
 
 class LoadCell(ElementSlave):
-    description = "Load cell: weighted mean of the adjacent span tensions, first-order filter, seeded noise"
+    description = ("Load cell: weighted mean of the adjacent span tensions, first- or second-order filter, "
+                   "seeded noise")
     PARAMETERS = (
         Var("angle_in", "rad", 0.0, "Angle between the entering web and the measuring axis (0: along it)",
             check=finite),
@@ -30,6 +31,9 @@ class LoadCell(ElementSlave):
             check=non_negative),
         Var("seed", "1", 0, "Integer seed of the noise (a function of seed and time only)", check=finite),
         Var("T0", "N", 0.0, "Initial filter output", check=finite),
+        Var("filter_order", "1", 1, "1: first-order lag; 2: second-order low pass, w_c = 1/tau_filter",
+            check=choice(1.0, 2.0)),
+        Var("filter_damping", "1", 0.707, "Damping ratio of the second-order filter", check=positive),
     )
     INPUTS = (
         Var("T_in", "N", 0.0, "Tension of the span entering the roller"),
@@ -42,4 +46,5 @@ class LoadCell(ElementSlave):
     )
 
     def make_model(self):
-        return LoadCellModel(self.angle_in, self.angle_out, self.tau_filter, self.noise_std, self.seed, self.T0)
+        return LoadCellModel(self.angle_in, self.angle_out, self.tau_filter, self.noise_std, self.seed, self.T0,
+                             self.filter_order, self.filter_damping)

@@ -33,6 +33,7 @@ class Profile(ElementSlave):
     )
     OUTPUTS = (
         Var("y", "1", 0.0, "Profile value"),
+        Var("dy", "1", 0.0, "Slope dy/dt of the profile (unit of y per second; 0 on flat parts and steps)"),
     )
 
     def make_model(self):

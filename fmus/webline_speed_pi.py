@@ -1,7 +1,10 @@
 """SpeedPI FMU: speed loop of {24} with feed-forward, torque limits and anti-windup.
 
 Thin wrapper of :class:`webline.physics.controllers.SpeedPIModel`. The
-torque is a feed-through of every input (the integrator is the only state).
+torque is a feed-through of every input (the integrator is the only state) when
+``tau_current`` = 0; with a current lag (``tau_current`` > 0) it is the lag's state and
+depends on no input, but a parameter cannot change the model description, so the
+dependencies are declared always (a superset, as the LoadCell does).
 """
 import os
 import sys
@@ -13,10 +16,10 @@ if not os.path.exists(getattr(sys.modules.get("webline"), "__file__", None) or "
     for _name in [m for m in sys.modules if m == "webline" or m.startswith("webline.")]:
         del sys.modules[_name]
 
-from webline.fmi_slave import ElementSlave, Var, choice, finite, positive
+from webline.fmi_slave import ElementSlave, Var, choice, finite, non_negative, positive
 from webline.physics.controllers import SpeedPIModel
 
-ALL_INPUTS = ("v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out")
+ALL_INPUTS = ("v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out", "a_ref")
 
 
 class SpeedPI(ElementSlave):
@@ -31,6 +34,11 @@ class SpeedPI(ElementSlave):
             check=choice(0.0, 1.0)),
         Var("b_ff", "N.m.s/rad", 0.0, "Friction coefficient used by the feed-forward", check=finite),
         Var("I0", "rad", 0.0, "Initial value of the integral of the speed error", check=finite),
+        Var("acc_ff", "1", 0, "1: add the acceleration feed-forward J a_ref/R (J d omega_ref/dt)",
+            check=choice(0.0, 1.0)),
+        Var("tau_current", "s", 0.0, "Time constant of the drive's current loop, a first-order lag on the "
+            "torque (0: none, tau is the PI law)", check=non_negative),
+        Var("tau0", "N.m", 0.0, "Initial torque of the current-loop lag (tau_current > 0)", check=finite),
     )
     INPUTS = (
         Var("v_ref", "m/s", 0.0, "Web speed reference"),
@@ -40,6 +48,7 @@ class SpeedPI(ElementSlave):
         Var("J", "kg.m2", 1.0, "Total inertia reflected at the motor"),
         Var("T_in", "N", 0.0, "Tension entering the element (0 for an unwind; feed-forward)"),
         Var("T_out", "N", 0.0, "Tension leaving the element (0 for a rewind; feed-forward)"),
+        Var("a_ref", "m/s2", 0.0, "Rate of the speed reference d v_ref/dt (acceleration feed-forward)"),
     )
     OUTPUTS = (
         Var("tau", "N.m", 0.0, "Motor torque command", depends=ALL_INPUTS),
@@ -49,4 +58,4 @@ class SpeedPI(ElementSlave):
 
     def make_model(self):
         return SpeedPIModel(self.K_ref, self.zeta, self.w_ld, self.tau_min, self.tau_max, self.feedforward,
-                            self.b_ff, self.I0)
+                            self.b_ff, self.I0, self.acc_ff, self.tau_current, self.tau0)

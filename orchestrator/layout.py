@@ -321,6 +321,9 @@ class _Checker:
                 self.err(("sensors", name, "roller"), f"{s.roller!r} is a {e.type}, not a load_cell_roller")
             if math.cos(s.angle_in) + math.cos(s.angle_out) <= 0.0:
                 self.err(("sensors", name), "wrap angles give no force along the load-cell axis")
+            if s.filter_order == 2 and not s.filter > 0.0:
+                self.err(("sensors", name, "filter_order"),
+                         "a second-order filter needs a time constant: set filter > 0 (w_c = 1/filter)")
 
     def experiment(self):
         x = self.L.experiment
@@ -667,6 +670,8 @@ class _Builder:
             T0 = opm.load_cell_reading(T_in, T_out, s.angle_in, s.angle_out)
             params = {"angle_in": s.angle_in, "angle_out": s.angle_out, "tau_filter": s.filter,
                       "noise_std": s.noise, "seed": float(s.seed if s.seed is not None else seed), "T0": T0}
+            if s.filter_order != 1:
+                params.update({"filter_order": float(s.filter_order), "filter_damping": s.filter_damping})
             self.add(Component(name, "LoadCell", params, {"T_in": T_in, "T_out": T_out},
                                self.L.path[r].name, "load_cell"), ("sensors", name))
             self.connect(self.span_names[r - 1], "T", name, "T_in")
@@ -693,15 +698,41 @@ class _Builder:
             self.connect(z["sensor"], "T", name, "T_meas")
             self.trim_of[t.element] = name
 
-    def _speed_loops(self):
+    def _zone_reference(self, k):
+        """The T_ref profile component of the zone holding span k, or None (no tension loop)."""
+        z = next(z for z in self.zones if z["first"] <= k <= z["last"])
+        return f"{z['loop']}_T_ref" if z["loop"] else None
+
+    def _feedforward_tensions(self, i, mode):
+        """(T_in, T_out) start values of element i's speed loop and their sources [(side, component)].
+
+        'measured': the adjacent spans' T (start: operating-point tensions). 'reference': the zones'
+        T_ref profiles where the zone has a tension loop, else unconnected at the operating-point
+        tension. 'none': operating-point tensions, unconnected (unused)."""
         op, n = self.op, len(self.L.path)
+        T_in, T_out = op.element_tensions(i)
+        sources = []
+        for side, k, exists in (("T_in", i - 1, i > 0), ("T_out", i, i < n - 1)):
+            if not exists or mode == "none":
+                continue
+            if mode == "measured":
+                sources.append((side, self.span_names[k], "T"))
+            else:
+                ref = self._zone_reference(k)
+                if ref is not None:
+                    sources.append((side, ref, "y"))
+                    value = self.profiles[ref][1][0]
+                    T_in, T_out = (value, T_out) if side == "T_in" else (T_in, value)
+        return T_in, T_out, sources
+
+    def _speed_loops(self):
+        op = self.op
         self.speed_pi = {}
         for name, loop in self.L.drives.speed_loops.items():
             i = self.index[name]
             e = self.L.path[i]
             R = self.radius[i]
             J = op.J[i] + (loop.drive.motor_inertia if loop.drive else 0.0)
-            T_in, T_out = op.element_tensions(i)
             tau = op.torque[name]
             lim = loop.torque_limit if loop.torque_limit is not None else 1.0e6
             if abs(tau) > lim:
@@ -709,26 +740,33 @@ class _Builder:
                          f"the operating point needs {tau:.4g} N.m, beyond the limit {lim:g} N.m")
             _, w_default = opm.speed_gains(J, loop.K_ref, loop.zeta)
             w_ld = loop.w_ld if loop.w_ld is not None else w_default
-            I0 = opm.speed_pi_start(tau, J, loop.K_ref, loop.zeta, w_ld, loop.feedforward, R, T_in, T_out,
+            ff_on = loop.feedforward != "none"
+            T_in, T_out, sources = self._feedforward_tensions(i, loop.feedforward)
+            # The integrator covers what the feed-forward (whatever tensions it sees) misses.
+            I0 = opm.speed_pi_start(tau, J, loop.K_ref, loop.zeta, w_ld, ff_on, R, T_in, T_out,
                                     e.friction, op.omega[i])
             params = {"K_ref": loop.K_ref, "zeta": loop.zeta, "w_ld": w_ld, "tau_min": -lim, "tau_max": lim,
-                      "feedforward": 1.0 if loop.feedforward else 0.0, "b_ff": e.friction, "I0": I0}
+                      "feedforward": 1.0 if ff_on else 0.0, "b_ff": e.friction, "I0": I0}
+            if loop.acceleration_feedforward:
+                params["acc_ff"] = 1.0
+            if loop.current_lag > 0.0:
+                params["tau_current"] = loop.current_lag
+                params["tau0"] = tau  # the lag starts at the operating-point torque
             inputs = {"v_ref": op.v[i], "v_trim": 0.0, "R": R, "omega": op.omega[i], "J": J,
                       "T_in": T_in, "T_out": T_out}
             comp = f"{name}_speed_pi"
             self.add(Component(comp, "SpeedPI", params, inputs, name, "speed_pi"), ("drives", "speed_loops", name))
             self.connect(self.speed_ref[name], "y", comp, "v_ref")
+            if loop.acceleration_feedforward:
+                self.connect(self.speed_ref[name], "dy", comp, "a_ref")
             if name in self.trim_of:
                 self.connect(self.trim_of[name], "v_trim", comp, "v_trim")
             if e.type in lm.ROLL_TYPES:
                 self.connect(name, "R", comp, "R")
                 self.connect(name, "J", comp, "J")
             self.connect(name, "omega_motor", comp, "omega")
-            if loop.feedforward:
-                if i > 0:
-                    self.connect(self.span_names[i - 1], "T", comp, "T_in")
-                if i < n - 1:
-                    self.connect(self.span_names[i], "T", comp, "T_out")
+            for side, src, var in sources:
+                self.connect(src, var, comp, side)
             self.speed_pi[name] = (comp, tau)
 
     def _element(self, i, e):
@@ -782,7 +820,11 @@ class _Builder:
         inputs = {"v_in": op.v[k], "v_out": op.v[k + 1], "T_in": op.T_in(k),
                   "theta_up": 0.0, "omega_up": op.omega[k], "theta_down": 0.0, "omega_down": op.omega[k + 1],
                   "L_ext": L0, "dL_ext": 0.0}
-        self.add(Component(name, "Span", params, inputs, a.name, "span"), ("path", k, "span"))
+        model = "Span"
+        if self.L.web.damping > 0.0:  # Kelvin-Voigt web: T is then a feed-through (DampedSpan)
+            model = "DampedSpan"
+            params["damping_time"] = self.L.web.damping
+        self.add(Component(name, model, params, inputs, a.name, "span"), ("path", k, "span"))
         self.connect(a.name, "v", name, "v_in")
         self.connect(b.name, "v", name, "v_out")
         if self.extrapolate:
@@ -820,6 +862,9 @@ class _Builder:
                 "driven": e.type in lm.DRIVEN_TYPES, "speed_pi": self.speed_pi.get(e.name, (None,))[0],
                 "eccentric": e.eccentricity is not None, "wrap": getattr(e, "wrap", None),
                 "non_ideal_drive": bool(loop and loop.drive),
+                "feedforward": loop.feedforward if loop else None,
+                "acceleration_feedforward": bool(loop and loop.acceleration_feedforward),
+                "current_lag": loop.current_lag if loop else 0.0,
                 "v0": op.v[i], "omega0": op.omega[i], "f0": op.omega[i] / (2 * math.pi),
             }
         spans = []
@@ -838,13 +883,14 @@ class _Builder:
         sensors = {name: {"component": name, "roller": path[r].name, "variable": f"{name}.T",
                           "span_in": self.span_names[r - 1], "span_out": self.span_names[r],
                           "zone": next(zi for zi, z in enumerate(self.zones) if z["first"] <= r - 1 <= z["last"]),
-                          "filter": s.filter, "noise": s.noise}
+                          "filter": s.filter, "filter_order": s.filter_order,
+                          "filter_damping": s.filter_damping, "noise": s.noise}
                    for name, (s, r) in self.sensors.items()}
         return {
             "name": L.name or Path(self.file).stem, "description": L.description,
             "layout": self.file, "layout_file": str(Path(self.file).resolve()) if self.file and Path(self.file).is_file() else self.file,
             "web": {"material": L.web.material, "width": L.web.width, "thickness": L.web.thickness,
-                    "density": L.web.density, "E": L.web.E, "EA": self.EA},
+                    "density": L.web.density, "E": L.web.E, "EA": self.EA, "damping": L.web.damping},
             "master": L.drives.master, "line_speed": "line_speed.y",
             "elements": elements,
             "rotating": [{"component": e.name, "element": e.name, "radius": self.radius[i],

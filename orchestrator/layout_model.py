@@ -141,6 +141,8 @@ class Web(Strict):
     E: Optional[Modulus] = _doc("Young's modulus; EA = E * width * thickness", default=None)
     EA: Optional[AxialStiffness] = _doc("Axial stiffness E*A (N), instead of E", default=None)
     density: Density = _doc("Web density rho_w (wound-roll inertia {4})")
+    damping: NonNegTime = _doc("Kelvin-Voigt damping time of the web: each span's tension is T_e + damping "
+                               "dT_e/dt, T_e of {20} (0: elastic web)", default=0.0)
 
 
 # ---- eccentricity and spans ----------------------------------------------------------------
@@ -241,12 +243,39 @@ class NonIdealDrive(Strict):
     backlash: NonNegAngle = _doc("Total backlash (dead-zone width)", default=0.0)
 
 
+FEEDFORWARD_MODES = ("measured", "reference", "none")
+
+
+def _feedforward(value):
+    """``measured``, ``reference`` or ``none``; true/false as before (true = measured, false = none)."""
+    if value is True:
+        return "measured"
+    if value is False:
+        return "none"
+    if isinstance(value, str) and value in FEEDFORWARD_MODES:
+        return value
+    raise ValueError(f"must be one of {', '.join(FEEDFORWARD_MODES)} (or true = measured, false = none) "
+                     f"(got {value!r})")
+
+
+Feedforward = Annotated[str, BeforeValidator(_feedforward), WithJsonSchema(
+    {"anyOf": [{"type": "string", "enum": list(FEEDFORWARD_MODES)}, {"type": "boolean"}],
+     "description": "measured | reference | none (true = measured, false = none)"})]
+
+
 class SpeedLoop(Strict):
     """Speed PI of {24}: K_p = J K_ref, w_ld = K_ref/(4 zeta^2)."""
     K_ref: PositiveRate = _doc("Reference gain K_ref (1/s)")
     zeta: float = _doc("Damping ratio zeta", default=1.1, gt=0)
     w_ld: Optional[PositiveRate] = _doc("Integral corner frequency (default K_ref/(4 zeta^2))", default=None)
-    feedforward: bool = _doc("Add the torque that holds the speed, R (T_in - T_out) + b omega", default=True)
+    feedforward: Feedforward = _doc(
+        "Tension feed-forward R (T_in - T_out) + b omega: 'measured' from the adjacent spans' tensions, "
+        "'reference' from the zones' tension set points (the operating-point tension where a zone has no "
+        "tension loop), 'none'; true = measured, false = none", default="measured")
+    acceleration_feedforward: bool = _doc("Add J dω_ref/dt = J a_ref/R, a_ref the slope of the speed reference",
+                                          default=False)
+    current_lag: NonNegTime = _doc("Time constant of the drive's current loop: a first-order lag on the torque "
+                                   "(0: none)", default=0.0)
     torque_limit: Optional[PositiveTorque] = _doc("Symmetric motor torque limit (default none)", default=None)
     drive: Optional[NonIdealDrive] = _doc("Non-ideal drive (default ideal, rigid)", default=None)
 
@@ -272,7 +301,10 @@ class LoadCellSensor(Strict):
     roller: Name = _doc("The load_cell_roller it sits on")
     angle_in: Angle = _doc("Angle of the entering web to the measuring axis (0: along it)", default=0.0)
     angle_out: Angle = _doc("Angle of the leaving web to the measuring axis (0: along it)", default=0.0)
-    filter: NonNegTime = _doc("First-order filter time constant (0: none)", default=0.0)
+    filter: NonNegTime = _doc("Filter time constant tau (0: none); second order: w_c = 1/tau", default=0.0)
+    filter_order: Literal[1, 2] = _doc("1: first-order lag; 2: second-order low pass (needs filter > 0)",
+                                       default=1)
+    filter_damping: float = _doc("Damping ratio of the second-order filter", default=0.707, gt=0)
     noise: Tension = _doc("Standard deviation of Gaussian measurement noise", default=0.0)
     seed: Optional[int] = _doc("Noise seed (default: from the sensor's position)", default=None)
 

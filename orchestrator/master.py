@@ -389,6 +389,15 @@ def plan_coupling(slaves, connections):
     # y layout per slave: coupled state outputs | other state outputs | feed-through
     # groups, coupled ones by level, then the sinks (feed nothing: read only to record)
     coupled = set(feeds.values())
+    # Outputs that feed only rate inputs (a span's dT) form their own groups: those are
+    # resolved once per round (Plan.rate_groups), and re-reading them together with an output
+    # a consumer needs now (a damped span's T, same inputs, same level) would feed the rate
+    # inputs a step newer than the schedule intends.
+    model_of = {s.name: s.model for s in slaves}
+    to_rate, to_value = set(), set()
+    for (dst, inp), node in feeds.items():
+        (to_rate if inp in model_of[dst].rates.values() else to_value).add(node)
+    rate_only = to_rate - to_value
     columns, units, descriptions = [], {}, {}
     n_y = 0
     groups, sinks = [], []
@@ -397,7 +406,7 @@ def plan_coupling(slaves, connections):
         state = [o for o in outs if (s.name, o) not in ft]
         s.n_state = sum((s.name, o) in coupled for o in state)
         s.n_rest = len(state) - s.n_state
-        key = {o: ((s.name, o) not in coupled, level.get((s.name, o), 0)) for o in outs}
+        key = {o: ((s.name, o) not in coupled, level.get((s.name, o), 0), (s.name, o) in rate_only) for o in outs}
         s.outputs = sorted(state, key=lambda o: key[o][0]) + sorted(
             (o for o in outs if (s.name, o) in ft), key=lambda o: key[o])
         s.y0 = n_y
@@ -418,7 +427,6 @@ def plan_coupling(slaves, connections):
             descriptions[col] = s.model.description(o)
     groups.sort(key=lambda g: g.level)  # stable: system order within a level
     # a generic output (unit "1", e.g. Profile.y) takes the unit of the inputs it feeds
-    model_of = {s.name: s.model for s in slaves}
     fed_units = {}
     for (dst, inp), node in feeds.items():
         fed_units.setdefault(node, set()).add(model_of[dst].unit(inp))

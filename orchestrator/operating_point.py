@@ -148,7 +148,12 @@ def solve(elements, zones, EA, master, v_line, web, tol=1e-13, max_iter=100):
 def speed_pi_start(tau_hold, J, K_ref, zeta, w_ld, feedforward, R, T_in, T_out, b_ff, omega):
     """Integrator I0 of the speed PI that outputs ``tau_hold`` at zero speed error.
 
-    tau = ff + K_p (e + w_ld I) with e = 0, so I0 = (tau_hold - ff)/(K_p w_ld)."""
+    tau = ff + K_p (e + w_ld I) with e = 0, so I0 = (tau_hold - ff)/(K_p w_ld). ``T_in``/``T_out``
+    are the tensions the feed-forward sees: the span tensions (feed-forward from the measured
+    tensions) or the zones' set points (from the references; they differ from the span
+    tensions by the idle rollers' friction, and the integrator covers that difference).
+    The acceleration feed-forward is 0 on a steady line, and a current-loop lag starts at
+    ``tau_hold`` (its own start value), so neither changes I0."""
     K_p, w_default = speed_gains(J, K_ref, zeta)
     w = w_ld if w_ld else w_default
     ff = R * (T_in - T_out) + b_ff * omega if feedforward else 0.0

@@ -54,7 +54,7 @@ def tension_columns(result):
         cells = chosen or cells
     cols = [f"{n}.T" for n in cells if f"{n}.T" in result]
     if not cols:
-        cols = [f"{n}.T" for n, m in models.items() if m == "Span" and f"{n}.T" in result]
+        cols = [f"{n}.T" for n, m in models.items() if m in ("Span", "DampedSpan") and f"{n}.T" in result]
     if not cols and not models:
         cols = [c for c in result.columns if c.endswith(".T")]
     return cols

@@ -18,29 +18,35 @@ DRIVE = ["drive.enabled", "drive.J_motor", "drive.stiffness", "drive.damping", "
 ROLL_PARAMS = ["R0", "R_core", "thickness", "width", "rho", "J_core", "b", "omega0", "theta0", *DRIVE]
 ROLL_OUT = {n: [] for n in ("omega", "theta", "R", "v", "J", "omega_motor")}
 SPAN_IN = ["v_in", "v_out", "T_in", "theta_up", "omega_up", "theta_down", "omega_down", "L_ext", "dL_ext"]
-SPEED_IN = ["v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out"]
+SPEED_IN = ["v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out", "a_ref"]
+SPAN_PARAMS = (["EA", "L0", "T0", "length_mode", "f_fixed"]
+               + [f"{e}.{f}[{j}]" for e in ("up", "down") for j in H8 for f in ("C", "psi")])
 
 # docs/architecture.md: parameters, inputs, {output: inputs it depends on}
 CONTRACT = {
-    "Span": (["EA", "L0", "T0", "length_mode", "f_fixed"]
-             + [f"{e}.{f}[{j}]" for e in ("up", "down") for j in H8 for f in ("C", "psi")],
-             SPAN_IN + ["a_in", "a_out", "dT_in"],
+    "Span": (SPAN_PARAMS, SPAN_IN + ["a_in", "a_out", "dT_in"],
              {"T": [], "L": ["theta_up", "theta_down", "L_ext"],
               "dL": ["theta_up", "omega_up", "theta_down", "omega_down", "dL_ext"], "dT": SPAN_IN}),
+    # Kelvin-Voigt web: T = T_e + damping_time dT_e/dt depends on what dT depends on
+    "DampedSpan": (SPAN_PARAMS + ["damping_time"], SPAN_IN + ["a_in", "a_out", "dT_in"],
+                   {"T": SPAN_IN, "L": ["theta_up", "theta_down", "L_ext"],
+                    "dL": ["theta_up", "omega_up", "theta_down", "omega_down", "dL_ext"], "dT": SPAN_IN}),
     "UnwindRoll": (ROLL_PARAMS, ["tau", "T_out", "dT_out"], {**ROLL_OUT, "a": ["tau", "T_out"]}),
     "RewindRoll": (ROLL_PARAMS, ["tau", "T_in", "dT_in"], {**ROLL_OUT, "a": ["tau", "T_in"]}),
     "IdleRoller": (["R", "J", "b", "omega0", "theta0"], ["T_in", "T_out", "dT_in", "dT_out"],
                    {"omega": [], "theta": [], "v": [], "a": ["T_in", "T_out"]}),
     "DrivenRoller": (["R", "J", "b", "omega0", "theta0", *DRIVE], ["tau", "T_in", "T_out", "dT_in", "dT_out"],
                      {"omega": [], "theta": [], "v": [], "omega_motor": [], "a": ["tau", "T_in", "T_out"]}),
-    "SpeedPI": (["K_ref", "zeta", "w_ld", "tau_min", "tau_max", "feedforward", "b_ff", "I0"], SPEED_IN,
+    "SpeedPI": (["K_ref", "zeta", "w_ld", "tau_min", "tau_max", "feedforward", "b_ff", "I0", "acc_ff",
+                 "tau_current", "tau0"], SPEED_IN,
                 {"tau": SPEED_IN, "omega_ref": ["v_ref", "v_trim", "R"]}),
     "TensionPI": (["K", "w_i", "sign", "trim_min", "trim_max", "I0"], ["T_ref", "T_meas"],
                   {"v_trim": ["T_ref", "T_meas"]}),
-    "LoadCell": (["angle_in", "angle_out", "tau_filter", "noise_std", "seed", "T0"],
+    "LoadCell": (["angle_in", "angle_out", "tau_filter", "noise_std", "seed", "T0", "filter_order",
+                  "filter_damping"],
                  ["T_in", "T_out", "dT_in", "dT_out"],
                  {"T": ["T_in", "T_out"]}),
-    "Profile": (["n"] + [f"{a}[{k}]" for k in range(1, 33) for a in ("t", "y")], [], {"y": []}),
+    "Profile": (["n"] + [f"{a}[{k}]" for k in range(1, 33) for a in ("t", "y")], [], {"y": [], "dy": []}),
 }
 
 
@@ -78,6 +84,8 @@ def test_variables_match_the_contract(fmus, model):
 RATE_OF = {  # rate input -> the input it extrapolates (FMI ``derivative`` attribute)
     "Span": {"omega_up": "theta_up", "omega_down": "theta_down", "a_in": "v_in", "a_out": "v_out",
              "dT_in": "T_in"},
+    "DampedSpan": {"omega_up": "theta_up", "omega_down": "theta_down", "a_in": "v_in", "a_out": "v_out",
+                   "dT_in": "T_in"},
     "UnwindRoll": {"dT_out": "T_out"}, "RewindRoll": {"dT_in": "T_in"},
     "IdleRoller": {"dT_in": "T_in", "dT_out": "T_out"}, "DrivenRoller": {"dT_in": "T_in", "dT_out": "T_out"},
     "LoadCell": {"dT_in": "T_in", "dT_out": "T_out"},
@@ -93,7 +101,7 @@ def test_rate_inputs_carry_the_derivative_attribute(fmus, model):
     assert found == RATE_OF.get(model, {})
     # and they are what the wrapper extrapolates
     from webline.physics import load_cell, material_roll, roller, span
-    models = {"Span": span.SpanModel, "UnwindRoll": material_roll.UnwindRollModel,
+    models = {"Span": span.SpanModel, "DampedSpan": span.SpanModel, "UnwindRoll": material_roll.UnwindRollModel,
               "RewindRoll": material_roll.RewindRollModel, "IdleRoller": roller.IdleRollerModel,
               "DrivenRoller": roller.DrivenRollerModel, "LoadCell": load_cell.LoadCellModel}
     if model in models:

@@ -16,6 +16,7 @@ COMMANDS = {
     "plot-sweep": ("webline.orchestrator.sweep_plot", "plot a finished sweep (sweep.csv)"),
     "accuracy": ("webline.orchestrator.accuracy_cmd", "co-simulation error vs the monolithic reference, per step/algorithm"),
     "export-ssp": ("webline.orchestrator.ssp_cmd", "write a layout as an SSP 1.0 package (.ssp) with its FMUs"),
+    "modes": ("webline.orchestrator.modes_cmd", "linearised line: modes and transfer functions to the load cells"),
     "validate": ("webline.orchestrator.validate_cmd", "check a line layout (file:line: field: reason), print its operating point"),
     "diagnose": ("webline.diagnosis.diagnose_cmd", "find the unmodelled effect behind a model-vs-measured tension gap"),
     "diagnose-bench": ("webline.diagnosis.benchmark_cmd", "benchmark webline diagnose on lines with hidden effects"),

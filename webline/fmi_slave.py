@@ -212,6 +212,52 @@ def fourier_vars(prefix, where):
     return out
 
 
+SPAN_FEED_THROUGH = ("v_in", "v_out", "T_in", "theta_up", "omega_up", "theta_down", "omega_down", "L_ext",
+                     "dL_ext")
+
+
+def span_declarations(damped):
+    """(PARAMETERS, INPUTS, OUTPUTS) of the Span FMU (``damped`` False) and the DampedSpan FMU
+    (True: adds ``damping_time`` and declares ``T`` a feed-through of the same inputs as ``dT``)."""
+    parameters = (
+        Var("EA", "N", 2.0e4, "Web axial stiffness E*A", check=positive),
+        Var("L0", "m", 1.0, "Nominal (mean) span length", check=positive),
+        Var("T0", "N", 100.0, "Initial tension" + (" (elastic tension T_e)" if damped else ""), check=finite),
+        Var("length_mode", "1", 0, "0 angle-locked Fourier, 1 external L/dL inputs, 2 fixed frequency {32}"),
+        Var("f_fixed", "Hz", 0.0, "Fundamental frequency for length_mode 2", check=finite),
+        *((Var("damping_time", "s", 0.0, "Kelvin-Voigt web: T = T_e + damping_time dT_e/dt (0: elastic web, "
+               "{20})", check=non_negative),) if damped else ()),
+        *fourier_vars("up", "upstream"),
+        *fourier_vars("down", "downstream"),
+    )
+    inputs = (
+        Var("v_in", "m/s", 1.0, "Web speed on the upstream element"),
+        Var("v_out", "m/s", 1.0, "Web speed on the downstream element"),
+        Var("T_in", "N", 0.0, "Tension of the web entering the span (upstream span; 0 after an unwind)"),
+        Var("theta_up", "rad", 0.0, "Angle of the upstream element"),
+        Var("omega_up", "rad/s", 0.0, "Angular speed of the upstream element", rate_of="theta_up"),
+        Var("theta_down", "rad", 0.0, "Angle of the downstream element"),
+        Var("omega_down", "rad/s", 0.0, "Angular speed of the downstream element", rate_of="theta_down"),
+        Var("L_ext", "m", 1.0, "Span length (length_mode 1)"),
+        Var("dL_ext", "m/s", 0.0, "Span length rate (length_mode 1)"),
+        Var("a_in", "m/s2", 0.0, "Web acceleration on the upstream element (extrapolates v_in inside a step; "
+            "0 holds it)", rate_of="v_in"),
+        Var("a_out", "m/s2", 0.0, "Web acceleration on the downstream element (extrapolates v_out inside a "
+            "step; 0 holds it)", rate_of="v_out"),
+        Var("dT_in", "N/s", 0.0, "Rate of T_in (extrapolates T_in inside a step; 0 holds it)", rate_of="T_in"),
+    )
+    outputs = (
+        Var("T", "N", 100.0, "Web tension in the span: T_e + damping_time dT_e/dt (Kelvin-Voigt)" if damped
+            else "Web tension in the span", depends=SPAN_FEED_THROUGH if damped else ()),
+        Var("L", "m", 1.0, "Span length", depends=("theta_up", "theta_down", "L_ext")),
+        Var("dL", "m/s", 0.0, "Span length rate dL/dt",
+            depends=("theta_up", "omega_up", "theta_down", "omega_down", "dL_ext")),
+        Var("dT", "N/s", 0.0, ("Elastic tension rate dT_e/dt" if damped else "Tension rate dT/dt")
+            + " ({20}; rate input for the extrapolation of T by its neighbours)", depends=SPAN_FEED_THROUGH),
+    )
+    return parameters, inputs, outputs
+
+
 class ElementSlave(Fmi2Slave):
     """A primitive element model (see ``webline.physics.element``) as an FMI 2.0 slave.
 

@@ -11,7 +11,7 @@ saturates in the direction the error pushes it (conditional integration).
 """
 import math
 
-from webline.physics.element import ElementModel, require_finite, require_positive
+from webline.physics.element import ElementModel, require_finite, require_non_negative, require_positive
 
 
 def speed_gains(J, K_ref, zeta):
@@ -48,6 +48,22 @@ def _limit_problems(p, lo_name, lo, hi_name, hi):
     return p
 
 
+def acceleration_feedforward(J, a_ref, R):
+    """Torque J d(omega_ref)/dt = J a_ref / R that accelerates inertia J with the speed reference.
+
+    {24} alone is a type-1 loop for the speed: following a ramp of the reference it lags by a
+    constant error (the integrator must build up the accelerating torque); feeding this torque
+    forward removes that error when J is the true inertia. The roll's radius change
+    (omega_ref = v_ref/R with R slowly varying, {5}) is left to the integrator."""
+    return J * a_ref / R
+
+
+def current_lag_rate(tau_m, tau_cmd, tau_current):
+    """d tau_m/dt of the drive's closed current (torque) loop as a first-order lag:
+    tau_m/tau_cmd = 1/(tau_current s + 1)."""
+    return (tau_cmd - tau_m) / tau_current
+
+
 class SpeedPIModel(ElementModel):
     """Speed loop of {24} with feed-forward, limits and conditional-integration anti-windup.
 
@@ -55,15 +71,23 @@ class SpeedPIModel(ElementModel):
     input: a material roll's inertia changes); tau = ff + K_p (e + w_ld I),
     ff = R (T_in - T_out) + b_ff omega when ``feedforward`` is 1 (the torque
     that holds the element at constant speed against the web, {7}/{8}/{22}).
-    ``w_ld`` <= 0 selects K_ref/(4 zeta^2). State: I = integral of e (rad).
+    Which tensions reach T_in/T_out (measured span tensions or the zone's set
+    point) is the layout's choice. ``w_ld`` <= 0 selects K_ref/(4 zeta^2).
+    State: I = integral of e (rad).
+
+    ``acc_ff`` 1 adds the acceleration feed-forward J a_ref/R
+    (:func:`acceleration_feedforward`), a_ref = d v_ref/dt (input, m/s^2).
+    ``tau_current`` > 0 puts a first-order lag (the drive's current loop) between the
+    torque command and the torque output: extra state tau_m
+    (:func:`current_lag_rate`, starting at ``tau0``), output tau = tau_m, which then
+    depends on no input. 0: the output is the PI law itself (no extra state).
     """
 
-    STATES = ("I",)
-    INPUTS = ("v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out")
+    INPUTS = ("v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out", "a_ref")
     OUTPUTS = ("tau", "omega_ref")
 
     def __init__(self, K_ref, zeta=1.1, w_ld=0.0, tau_min=-math.inf, tau_max=math.inf, feedforward=0,
-                 b_ff=0.0, I0=0.0):
+                 b_ff=0.0, I0=0.0, acc_ff=0, tau_current=0.0, tau0=0.0):
         self.K_ref, self.zeta = K_ref, zeta
         self.w_ld_param = w_ld
         self.w_ld = w_ld if w_ld > 0.0 else (K_ref / (4.0 * zeta * zeta) if zeta > 0.0 else math.nan)
@@ -71,21 +95,28 @@ class SpeedPIModel(ElementModel):
         self.feedforward_value = feedforward
         self.feedforward = int(round(feedforward)) == 1 if math.isfinite(feedforward) else False
         self.b_ff, self.I0 = b_ff, I0
+        self.acc_ff_value = acc_ff
+        self.acc_ff = int(round(acc_ff)) == 1 if math.isfinite(acc_ff) else False
+        self.tau_current, self.tau0 = tau_current, tau0
+        self.lag = tau_current > 0.0
+        self.STATES = ("I", "tau_m") if self.lag else ("I",)
 
     def problems(self):
         p = require_positive([], K_ref=self.K_ref, zeta=self.zeta)
-        require_finite(p, w_ld=self.w_ld_param, b_ff=self.b_ff, I0=self.I0)
+        require_finite(p, w_ld=self.w_ld_param, b_ff=self.b_ff, I0=self.I0, tau0=self.tau0)
+        require_non_negative(p, tau_current=self.tau_current)
         _limit_problems(p, "tau_min", self.tau_min, "tau_max", self.tau_max)
-        if self.feedforward_value not in (0.0, 1.0):
-            p.append(("feedforward", f"must be 0 or 1 (got {self.feedforward_value!r})"))
+        for name, value in (("feedforward", self.feedforward_value), ("acc_ff", self.acc_ff_value)):
+            if value not in (0.0, 1.0):
+                p.append((name, f"must be 0 or 1 (got {value!r})"))
         return p
 
     def initial_state(self):
-        return [self.I0]
+        return [self.I0, self.tau0] if self.lag else [self.I0]
 
     def _law(self, x, u):
-        """(tau, unsaturated tau, error, omega_ref)."""
-        v_ref, v_trim, R, omega, J, T_in, T_out = u
+        """(tau command, unsaturated tau, error, omega_ref)."""
+        v_ref, v_trim, R, omega, J, T_in, T_out = u[:7]
         if not R > 0.0:
             raise ValueError(f"input R must be > 0 (got {R!r})")
         if not J > 0.0:
@@ -93,16 +124,21 @@ class SpeedPIModel(ElementModel):
         omega_ref = (v_ref + v_trim) / R
         e = omega_ref - omega
         ff = R * (T_in - T_out) + self.b_ff * omega if self.feedforward else 0.0
+        if self.acc_ff:
+            ff += acceleration_feedforward(J, u[7], R)  # only read when on: older 7-input callers stay valid
         tau, unsat = pi_output(J * self.K_ref, self.w_ld, e, x[0], ff, self.tau_min, self.tau_max)
         return tau, unsat, e, omega_ref
 
     def derivatives(self, t, x, u):
         tau, unsat, e, _ = self._law(x, u)
+        if self.lag:
+            return [integral_rate(e, unsat, self.tau_min, self.tau_max),
+                    current_lag_rate(x[1], tau, self.tau_current)]
         return [integral_rate(e, unsat, self.tau_min, self.tau_max)]
 
     def outputs(self, t, x, u):
         tau, _, _, omega_ref = self._law(x, u)
-        return [tau, omega_ref]
+        return [x[1] if self.lag else tau, omega_ref]
 
 
 class TensionPIModel(ElementModel):

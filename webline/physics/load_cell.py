@@ -39,6 +39,21 @@ def first_order_filter_rate(y, u, tau):
     return (u - y) / tau
 
 
+def second_order_filter_rates(y, dy, u, w_c, zeta):
+    """(dy/dt, d2y/dt2) of the second-order low pass y/u = w_c^2/(s^2 + 2 zeta w_c s + w_c^2):
+    y'' = w_c^2 (u - y) - 2 zeta w_c y' (a load cell's own mass-spring plus its amplifier's
+    filter; zeta = 0.707 is the Butterworth response)."""
+    return dy, w_c * w_c * (u - y) - 2.0 * zeta * w_c * dy
+
+
+def second_order_step_response(t, w_c, zeta):
+    """Unit-step response of :func:`second_order_filter_rates` from rest (0 < zeta < 1):
+    1 - e^{-zeta w_c t} (cos w_d t + zeta/sqrt(1 - zeta^2) sin w_d t), w_d = w_c sqrt(1 - zeta^2)."""
+    s = math.sqrt(1.0 - zeta * zeta)
+    w_d = w_c * s
+    return 1.0 - math.exp(-zeta * w_c * t) * (math.cos(w_d * t) + zeta / s * math.sin(w_d * t))
+
+
 def _splitmix64(z):
     """One SplitMix64 output for input ``z`` (a well-mixed 64-bit hash; Steele et al. 2014)."""
     z = (z + 0x9E3779B97F4A7C15) & _MASK64
@@ -64,8 +79,11 @@ def standard_normal(seed, t, resolution=NOISE_TIME_RESOLUTION):
 class LoadCellModel(ElementModel):
     """Load-cell reading T = filter(w_in T_in + w_out T_out) + noise.
 
-    ``tau_filter`` > 0: first-order lag with state T (starts at ``T0``);
-    0: no filter and no state, the reading follows the inputs directly.
+    ``tau_filter`` > 0 with ``filter_order`` 1: first-order lag with state T (starts at
+    ``T0``); with ``filter_order`` 2: second-order low pass
+    (:func:`second_order_filter_rates`), w_c = 1/``tau_filter``, damping ``filter_damping``,
+    states [T, dT] starting at rest at ``T0``. ``tau_filter`` 0: no filter and no state
+    (either order), the reading follows the inputs directly.
     ``noise_std`` (N): Gaussian measurement noise added to the reading,
     ``standard_normal(seed, t)``; 0 turns it off.
     """
@@ -75,10 +93,17 @@ class LoadCellModel(ElementModel):
     EXTRAPOLATE = {"T_in": "dT_in", "T_out": "dT_out"}
     RATE_INPUTS = ("dT_in", "dT_out")
 
-    def __init__(self, angle_in=0.0, angle_out=0.0, tau_filter=0.0, noise_std=0.0, seed=0, T0=0.0):
+    def __init__(self, angle_in=0.0, angle_out=0.0, tau_filter=0.0, noise_std=0.0, seed=0, T0=0.0,
+                 filter_order=1, filter_damping=0.707):
         self.angle_in, self.angle_out = angle_in, angle_out
         self.tau_filter, self.noise_std, self.seed, self.T0 = tau_filter, noise_std, seed, T0
-        self.STATES = ("T",) if tau_filter > 0.0 else ()
+        self.filter_order_value, self.filter_damping = filter_order, filter_damping
+        self.filter_order = 2 if filter_order == 2 else 1
+        if not tau_filter > 0.0:
+            self.STATES = ()
+        else:
+            self.STATES = ("T", "dT") if self.filter_order == 2 else ("T",)
+        self.w_c = 1.0 / tau_filter if tau_filter > 0.0 else math.inf
         try:
             self.w_in, self.w_out = wrap_weights(angle_in, angle_out)
         except (ValueError, OverflowError):
@@ -87,6 +112,10 @@ class LoadCellModel(ElementModel):
     def problems(self):
         p = require_finite([], angle_in=self.angle_in, angle_out=self.angle_out, seed=self.seed, T0=self.T0)
         require_non_negative(p, tau_filter=self.tau_filter, noise_std=self.noise_std)
+        if self.filter_order_value not in (1.0, 2.0):
+            p.append(("filter_order", f"must be 1 or 2 (got {self.filter_order_value!r})"))
+        if not (self.filter_damping > 0.0 and math.isfinite(self.filter_damping)):
+            p.append(("filter_damping", f"must be > 0 (got {self.filter_damping!r})"))
         if not p and math.isnan(self.w_in):
             p.append(("angle_in/angle_out",
                       f"wrap angles {self.angle_in!r}, {self.angle_out!r} rad give no force along the load-cell axis"))
@@ -95,13 +124,15 @@ class LoadCellModel(ElementModel):
         return p
 
     def initial_state(self):
-        return [self.T0] if self.STATES else []
+        return [self.T0, 0.0][:len(self.STATES)]
 
     def derivatives(self, t, x, u):
         if not self.STATES:
             return []
-        return [first_order_filter_rate(x[0], measured_tension(u[0], u[1], self.w_in, self.w_out),
-                                        self.tau_filter)]
+        reading = measured_tension(u[0], u[1], self.w_in, self.w_out)
+        if len(self.STATES) == 2:
+            return list(second_order_filter_rates(x[0], x[1], reading, self.w_c, self.filter_damping))
+        return [first_order_filter_rate(x[0], reading, self.tau_filter)]
 
     def noise(self, t):
         if self.noise_std == 0.0:

@@ -29,10 +29,24 @@ def profile_value(ts, ys, t):
     return ys[k] + f * (ys[k + 1] - ys[k])
 
 
-class ProfileModel(ElementModel):
-    """Source with output ``y`` = ``profile_value(t[:n], y[:n], time)``; no inputs, no states."""
+def profile_slope(ts, ys, t):
+    """dy/dt of the table at t: the slope of the segment that holds t (right-continuous, like
+    :func:`profile_value`); 0 before the first point, after the last and on a step (two
+    points at the same time: the jump itself has no finite slope)."""
+    k = bisect.bisect_right(ts, t + TIME_TOLERANCE) - 1
+    if k < 0 or k >= len(ts) - 1:
+        return 0.0
+    dt = ts[k + 1] - ts[k]
+    if not dt > 0.0:
+        return 0.0
+    return (ys[k + 1] - ys[k]) / dt
 
-    OUTPUTS = ("y",)
+
+class ProfileModel(ElementModel):
+    """Source with output ``y`` = ``profile_value(t[:n], y[:n], time)`` and its slope ``dy``
+    (:func:`profile_slope`; feeds a speed loop's acceleration feed-forward); no inputs, no states."""
+
+    OUTPUTS = ("y", "dy")
 
     def __init__(self, n, t, y):
         self.n_value = n
@@ -52,4 +66,4 @@ class ProfileModel(ElementModel):
         return p
 
     def outputs(self, t, x, u):
-        return [profile_value(self.t, self.y, t)]
+        return [profile_value(self.t, self.y, t), profile_slope(self.t, self.y, t)]

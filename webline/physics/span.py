@@ -26,6 +26,16 @@ def tension_rate(T, T_in, v_in, v_out, EA, L, dL_up_dt=0.0, dL_down_dt=0.0):
             + (EA - T) * dL_down_dt + (EA - T_in) * dL_up_dt) / L
 
 
+def kelvin_voigt_tension(T_e, dT_e_dt, damping_time):
+    """Tension of a Kelvin-Voigt web: the elastic tension plus a strain-rate (viscous) term.
+
+    With strain eps = T_e/EA, a spring EA in parallel with a dashpot EA * damping_time
+    carries T = EA (eps + damping_time eps') = T_e + damping_time dT_e/dt, where T_e
+    follows {20} (mass conservation fixes the strain, not the force). At steady
+    state dT_e/dt = 0 and T = T_e: the operating point does not change."""
+    return T_e + damping_time * dT_e_dt
+
+
 def steady_state_tension(T_in, v_in, v_out, EA):
     """Equilibrium of {21}: T = EA (v_out - v_in)/v_out + v_in T_in / v_out."""
     return EA * (v_out - v_in) / v_out + v_in * T_in / v_out
@@ -44,6 +54,15 @@ class SpanModel(ElementModel):
     speed and radius); 1 L and dL/dt from inputs ``L_ext``/``dL_ext``;
     2 the paper's {32}: upstream series at a fixed frequency ``f_fixed``.
     ``C_up``/``psi_up``/``C_down``/``psi_down``: Fourier coefficients (m, rad).
+
+    ``damping_time`` (s) > 0 makes the web Kelvin-Voigt ({20} with a strain-rate
+    term, :func:`kelvin_voigt_tension`): the state (named ``T`` as before) is the elastic
+    tension T_e, which obeys {20} unchanged, and the output ``T`` is
+    T_e + damping_time dT_e/dt, so it then depends directly on the inputs. ``dT`` stays
+    dT_e/dt (it only extrapolates T inside a co-simulation step). ``T_in`` is what the
+    layout connects: the upstream span's output T (for a damped upstream span, its
+    total tension rather than the elastic tension that sets the entering strain; the
+    difference, damping_time dT_e,in/dt, vanishes at steady state).
     """
 
     STATES = ("T",)
@@ -55,8 +74,9 @@ class SpanModel(ElementModel):
     RATE_INPUTS = ("a_in", "a_out", "dT_in")
 
     def __init__(self, EA, L0, T0, C_up=(), psi_up=(), C_down=(), psi_down=(),
-                 length_mode=0, f_fixed=0.0):
+                 length_mode=0, f_fixed=0.0, damping_time=0.0):
         self.EA, self.L0, self.T0 = EA, L0, T0
+        self.damping_time = damping_time
         self.C_up, self.psi_up = list(C_up), list(psi_up)
         self.C_down, self.psi_down = list(C_down), list(psi_down)
         self.length_mode, self.f_fixed = int(round(length_mode)), f_fixed
@@ -66,6 +86,8 @@ class SpanModel(ElementModel):
 
     def problems(self):
         p = require_positive([], EA=self.EA, L0=self.L0)
+        if not (self.damping_time >= 0.0 and math.isfinite(self.damping_time)):
+            p.append(("damping_time", f"must be >= 0 (got {self.damping_time!r})"))
         if self.length_mode not in (0, 1, 2):
             p.append(("length_mode", f"must be 0, 1 or 2 (got {self.length_mode!r})"))
         amp = sum(abs(c) for c in self.C_up + self.C_down)
@@ -101,4 +123,6 @@ class SpanModel(ElementModel):
 
     def outputs(self, t, x, u):
         L, up, dn = self.length(t, u)
-        return [x[0], L, up + dn, tension_rate(x[0], u[2], u[0], u[1], self.EA, L, up, dn)]
+        rate = tension_rate(x[0], u[2], u[0], u[1], self.EA, L, up, dn)
+        T = kelvin_voigt_tension(x[0], rate, self.damping_time) if self.damping_time else x[0]
+        return [T, L, up + dn, rate]
