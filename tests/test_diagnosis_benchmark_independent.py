@@ -104,7 +104,11 @@ def test_forms_are_gated_on_what_the_layout_accepts(line):
     s2, rec2 = BI.gate_forms(path, alts)
     load_layout(path, s2)
     assert set(rec2) == set(alts)
-    assert all(rec2[k]["applied"] is not None for k in rec2 if k.endswith(".filter"))
+    # the layout has every FORMS.md key (h-forms): all drawn forms are applied as drawn
+    assert all(r["applied"] is not None for r in rec2.values()), rec2
+    assert all(s2[k] == ("reference" if case.model.forms["feedforward"] == "reference" else "none")
+               for k in s2 if k.endswith(".feedforward"))
+    assert all(s2[f"sensors.{lc}.filter_order"] == 2 for lc in ("lc9", "lc19"))
     tau = quantity(s2["sensors.lc9.filter"], "time")
     assert tau == pytest.approx(5e-3 * case.model.forms["load_cell"]["lc9"]["tau_scale"], rel=1e-3)
 
@@ -136,6 +140,9 @@ def test_truth_is_simulated_by_the_monolithic_engine(line, tmp_path, monkeypatch
     assert yaml.safe_load((blind / "line.yaml").read_text()) == doc
     tl = yaml.safe_load((tmp_path / "c" / "truth" / "truth_layout.yaml").read_text())
     assert "web.E" in tl["set"] and any(k.endswith(".filter") for k in tl["set"])
+    applied = {k for k, r in truth["forms_applied"].items() if r["applied"] is not None}
+    assert applied <= set(tl["set"])
+    assert {"web.damping", "sensors.lc9.filter_order", "drives.speed_loops.unwind.current_lag"} <= applied
     for r, spec in zip(truth["runs"], case.runs):
         assert r["conditions"]["roll_radius"]["unwind"] == f"{spec.unwind_radius_in:g} in"
         R = quantity(r["truth_conditions"]["roll_radius"]["unwind"], "length")
@@ -223,7 +230,7 @@ def test_target_scores_on_hand_made_reports():
     # c1: found, f within 2 %, amplitude 10 % off; nominal 0.8 -> refined 0.3, achievable 0.3 (share 1.0)
     c1 = {"truth": _truth([_ecc("idler_u1", [1e-4])], [_run("r1", False, fund, 0.3, 1.0),
                                                       _run("r2", True, fund, 0.2, 1.0)]),
-          "report": {"effects": [_eff("idler_u1", "eccentricity", 1.015, 1.1e-4)],
+          "report": {"effects": [_eff("idler_u1", "eccentricity", 1.015, 1.1e-4), _eff("speed_gain", "parameter")],
                      "holdout": _gap(0.8, 0.3, 0.4, 0.35, 0.6, 0.4)}}
     # c2: right element, fundamental 3 % off: dropped (a false find and a miss); lc19 got worse
     c2 = {"truth": _truth([_ecc("guide_in", [2e-4])], [_run("r1", False, fund, 0.1, 1.0)]),
@@ -237,7 +244,8 @@ def test_target_scores_on_hand_made_reports():
     # c4: noise only, 3 records one ramped, a periodic source invented
     c4 = {"truth": _truth([], [_run("r1", False, fund, 0.3, 0.4), _run("r2", False, fund, 0.3, 0.4, profile="speed_ramp"),
                                _run("r3", True, fund, 0.3, 0.4)]),
-          "report": {"effects": [_eff("roller19", "eccentricity", 1.0)], "holdout": _gap(0.8, 0.8, 0.8, 0.8)}}
+          "report": {"effects": [_eff("roller19", "eccentricity", 1.0), _eff("lc9", "sensor")],
+                     "holdout": _gap(0.8, 0.8, 0.8, 0.8)}}
     # c5: diagnosis failed: not scored
     c5 = {"truth": _truth([_ecc("idler_u1", [1e-4])], [_run("r1", False, fund, 0.3, 1.0)]), "report": None}
     s = BI.target_scores([c1, c2, c3, c4, c5])
@@ -245,6 +253,7 @@ def test_target_scores_on_hand_made_reports():
     assert s["counts"] == {"true": 3, "reported": 4, "matched": 2, "ambiguous": 0}
     assert s["precision"] == pytest.approx(2 / 4) and s["recall"] == pytest.approx(2 / 3)
     assert [d["element"] for d in s["demoted_by_fundamental"]] == ["guide_in"]
+    assert s["other_reports"] == {"parameter": 1, "sensor": 1}  # listed, not in precision
     assert s["per_kind"]["eccentricity"] == {"true": 2, "reported": 3, "matched": 1, "precision": 1 / 3,
                                              "recall": 0.5}
     assert [w["id"] for w in s["worse_cases"]] == ["x"] and s["worse_cases"][0]["sensors"][0]["sensor"] == "lc19.T"
@@ -256,7 +265,7 @@ def test_target_scores_on_hand_made_reports():
     assert s["amplitude"] == {"n": 2, "ok": 2, "flagged": 1, "rel_errors": s["amplitude"]["rel_errors"]}
     assert s["amplitude"]["rel_errors"]["max"] == pytest.approx(0.5)
     assert s["noise_only"] == {"cases": 1, "records": 3, "ramped_records": 1, "invented_periodic": 1,
-                               "invented_any": 1}
+                               "invented_any": 2}
     v = s["verdict"]
     assert (v["precision"], v["recall"], v["no_worse_nrmse"], v["closed_share_in_sample"], v["amplitude"],
             v["no_invented_periodic"]) == ("fail", "fail", "fail", "fail", "pass", "fail")
