@@ -170,8 +170,10 @@ def rescore(out, results_path=None, family="own"):
     results = [B.load_case(p) for p in folders]
     summary = B.summarize(results)
     summary["generation_failures"] = []
-    old = Path(results_path) if results_path else Path(out) / "diagnosis_results.json"
     meta = {}
+    # the run's meta: from the results file named, else from the run's own one in OUT
+    olds = [Path(p) for p in (results_path, Path(out) / "diagnosis_results.json") if p]
+    old = next((p for p in olds if p.exists()), olds[-1])
     if old.exists():
         try:
             d = json.loads(old.read_text())
@@ -228,7 +230,7 @@ def _independent_text(results, meta):
     from webline.diagnosis import benchmark_independent as BI
     fs = BI.forms_summary(results)
     applied = ", ".join(f"{k} {v['applied']}/{v['drawn']}" for k, v in fs.items())
-    rates = sorted({r["spec"]["fs_hz"] for res in results for r in res["truth"].get("runs", [])})
+    rates = sorted({(r.get("spec") or {}).get("fs_hz") for res in results for r in res["truth"].get("runs", [])} - {None})
     engines = sorted({r.get("engine") for res in results for r in res["truth"].get("runs", [])} - {None})
     return (f"Truth engine: {', '.join(engines) or '-'}; sample rates {', '.join(f'{x:g}' for x in rates)} Hz. "
             f"Model-form keys applied (applied/drawn, a key the layout rejects is not applied): {applied or '-'}. "

@@ -276,3 +276,26 @@ def test_target_scores_on_hand_made_reports():
     assert s2["verdict"]["precision"] == "pass" and s2["verdict"]["no_worse_nrmse"] == "pass"
     md = BI.side_by_side({"own": s2, "independent": s})
     assert md.count("\n") == 9 and "| own | independent |" in md
+
+
+def test_command_rescores_both_families_side_by_side(tmp_path):
+    from webline.diagnosis import benchmark_cmd
+    fund = {"idler_u1": 1.0}
+    for fam, folder in (("own", tmp_path / "cases" / "c01"), ("independent", tmp_path / "independent" / "cases" / "c01")):
+        truth = _truth([_ecc("idler_u1", [1e-4])], [_run("r1", False, fund, 0.3, 1.0)])
+        truth.update(id="c01", category="eccentric")
+        rep = {"effects": [_eff("idler_u1", "eccentricity", 1.0 if fam == "own" else 1.05, 1e-4)],
+               "holdout": _gap(0.8, 0.3, 0.4, 0.35)}
+        (folder / "truth").mkdir(parents=True)
+        (folder / "diagnosis").mkdir()
+        (folder / "truth" / "truth.json").write_text(json.dumps(truth))
+        (folder / "diagnosis" / "report.json").write_text(json.dumps(rep))
+    out = tmp_path / "res.json"
+    assert benchmark_cmd.main(["--family", "both", "--rescore", "--out", str(tmp_path), "--results", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "webline-diagnose-bench-2" and list(doc["families"]) == ["own", "independent"]
+    own, ind = (doc["families"][f]["target_scores"] for f in ("own", "independent"))
+    assert own["recall"] == 1.0 and ind["recall"] == 0.0          # 5 % off in frequency: not a find
+    md = out.with_suffix(".md").read_text()
+    assert "| measure | own | independent | target |" in md
+    assert '## Family "own"' in md and '## Family "independent"' in md
