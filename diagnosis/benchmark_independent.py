@@ -391,9 +391,12 @@ def make_case(case, folder, line_doc, fmu_paths=None, *, simulate=None):
         system = load_system(truth_layout, B._overrides(texp))
         t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
         res = simulate(system, t)
-        kind = (getattr(res, "meta", None) or {}).get("kind")
+        meta = getattr(res, "meta", None) or {}
+        kind = meta.get("kind")
         if kind not in MONOLITHIC_KINDS:
             raise RuntimeError(f"case {case.id} {run.name}: truth engine {kind!r} is not monolithic")
+        if meta.get("status", "ok") != "ok":  # the fast engine reports a failure instead of raising
+            raise RuntimeError(f"case {case.id} {run.name}: truth simulation failed: {meta.get('message', '')[:400]}")
         t = np.asarray(res.time, float)
         rng = np.random.default_rng(run.seed)
         settle = t >= t[0] + min(1.0, 0.1 * run.duration_s)  # as the diagnosis's metrics

@@ -155,6 +155,16 @@ def test_truth_is_simulated_by_the_monolithic_engine(line, tmp_path, monkeypatch
         BI.make_case(case, tmp_path / "d", doc, simulate=fake)
 
 
+def test_truth_engine_is_the_fast_one_when_it_exists(monkeypatch):
+    import sys
+    import types
+    calls = []
+    fake = types.ModuleType("webline.orchestrator.engine")
+    fake.simulate = lambda system, t_eval: calls.append((system, t_eval)) or "engine result"
+    monkeypatch.setitem(sys.modules, "webline.orchestrator.engine", fake)
+    assert BI.simulate_truth("sys", [0.0, 1.0]) == "engine result" and calls == [("sys", [0.0, 1.0])]
+
+
 # ---------------------------------------------------------------- measurement ----
 def _slope(x, fs, band):
     f = np.fft.rfftfreq(len(x), 1 / fs)
