@@ -2,12 +2,15 @@
 """Benchmark of ``webline diagnose`` (issue #4, "Proof"): writes
 bench/diagnosis_results.json and bench/diagnosis_results.md and prints the table.
 
-    python bench/diagnosis_benchmark.py [--cases N] [--seed S] [--out DIR] [--quick] [--jobs J]
+    python bench/diagnosis_benchmark.py [--family own|independent|both] [--cases N] [--seed S] [--out DIR] [--quick] [--jobs J]
 
 Same as ``webline diagnose-bench --results bench/diagnosis_results.json``; the
 case files (blind inputs, truth, reports) go to --out (default
-out/diagnose-bench; --quick writes its results there too, not to bench/). The default 24 cases take about 20-30 min on 2 cores.
-Generator and scorer: diagnosis/benchmark.py.
+out/diagnose-bench; --quick writes its results there too, not to bench/). Default: both
+families side by side. The own family's 24 cases take about 20-30 min on 2 cores; the
+independent family's 60 s records (1-3 per case) cost the diagnosis about 6-18 times as
+much per case while it co-simulates (hours; --family own or --cases N to shorten).
+Generators and scorer: diagnosis/benchmark.py, diagnosis/benchmark_independent.py.
 """
 import sys
 from pathlib import Path

@@ -892,13 +892,15 @@ def markdown(summary, results=None, meta=None):
 
 
 # ============================================================ one case ====
-def evaluate_case(case, root, line_doc, fmu_paths=None, timeout=1800, extra=()):
-    """Make a case, diagnose it blind, score it. Returns the result record."""
+def evaluate_case(case, root, line_doc, fmu_paths=None, timeout=1800, extra=(), make=None):
+    """Make a case (``make``, default :func:`make_case`), diagnose it blind, score
+    it. Returns the result record."""
+    make = make or make_case
     root = Path(root)
     folder = root / "cases" / case.id
     t0 = time.perf_counter()
     try:
-        truth = make_case(case, folder, line_doc, fmu_paths)
+        truth = make(case, folder, line_doc, fmu_paths)
     except Exception as exc:  # a truth simulation that failed: recorded, not scored
         return {"truth": {"id": case.id, "category": case.category, "effects": [asdict(e) for e in case.effects],
                           "runs": []}, "generation_error": str(exc)[:2000], "report": None,
