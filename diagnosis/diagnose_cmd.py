@@ -30,6 +30,8 @@ def parser():
                     help="do not screen backlash, compliance, sensor and parameter effects")
     ap.add_argument("--jobs", type=int, default=None,
                     help="simulations run in parallel worker processes (default: 2 if the machine has 2+ cores)")
+    ap.add_argument("--engine", choices=("fast", "cosim"), default="fast",
+                    help="model runs: the compiled monolithic ODE (fast, default) or the FMU co-simulation")
     ap.add_argument("--quiet", action="store_true", help="only warnings")
     return ap
 
@@ -47,7 +49,8 @@ def main(argv=None):
     opt = Options(harmonics=args.harmonics, max_effects=args.max_effects, significance=args.significance,
                   polish=not args.no_polish, other_effects=not args.no_other,
                   progress=not args.quiet and sys.stderr.isatty(),
-                  jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1))
+                  jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1),
+                  engine=args.engine)
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:

@@ -61,7 +61,8 @@ class Options:
     other_effects: bool = True       # screen non-periodic effects when a significant residual remains
     fmu_paths: dict = None
     progress: bool = False
-    jobs: int = 1                    # simulations in parallel (worker processes)
+    jobs: int = 1                    # simulations in parallel (worker processes; co-simulation engine)
+    engine: str = "fast"             # "fast": compiled monolithic ODE; "cosim": FMU co-simulation
 
 
 class DiagnoseError(ValueError):
@@ -150,7 +151,8 @@ class Diagnosis:
             load_system(self.layout_path)
         except LayoutError as exc:
             raise DiagnoseError(f"invalid layout:\n{exc}") from None
-        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress, jobs=self.opt.jobs)
+        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress, jobs=self.opt.jobs,
+                               engine=self.opt.engine)
         self.ctx = []
         names = set()
         for paths, fit in ((self.run_paths, True), (self.holdout_paths, False)):

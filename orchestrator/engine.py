@@ -935,17 +935,17 @@ def simulate(system, t_eval=None, params=None, h=None, h_max=H_MAX, compiled=Non
     return res
 
 
-def simulate_batch(systems, t_eval=None, h_max=H_MAX):
+def simulate_batch(systems, t_eval=None, h_max=H_MAX, compiled=None):
     """Run variants of one structure (equal generated code: same models, states, connections
     and options; any parameter values) in one compiled call, a variant per thread.
     Returns [Result] in order. Systems of differing structure raise ValueError
-    (run them with :func:`simulate`)."""
+    (run them with :func:`simulate`). ``compiled``: their :class:`Compiled`, if already built."""
     from webline.orchestrator.reference import output_times
     systems = list(systems)
     if not systems:
         return []
     t_wall = _time.perf_counter()
-    comps = [compile_system(s) for s in systems]
+    comps = list(compiled) if compiled is not None else [compile_system(s) for s in systems]
     base = comps[0]
     for s, c in zip(systems, comps):
         if c.source != base.source:
