@@ -631,7 +631,8 @@ class _RewindRoll(_MaterialRoll):
 
 GENERATORS = {"Profile": _Profile, "LoadCell": _LoadCell, "TensionPI": _TensionPI, "SpeedPI": _SpeedPI,
               "Span": _Span, "IdleRoller": _IdleRoller, "DrivenRoller": _DrivenRoller,
-              "UnwindRoll": _UnwindRoll, "RewindRoll": _RewindRoll}
+              "UnwindRoll": _UnwindRoll, "RewindRoll": _RewindRoll,
+              "DampedSpan": _Span}  # the Kelvin-Voigt span of the model forms (SpanModel with damping_time)
 
 
 # ---- the integrator (compiled with each generated module) --------------------------------
@@ -837,11 +838,10 @@ class Compiled:
         return min(h_max, factor / rho) if rho > 0 else h_max
 
 
-_COMPILED = {}
-
-
 def compile_system(system):
-    """:class:`Compiled` of ``system`` (the generated code compiled once per structure)."""
+    """:class:`Compiled` of ``system``: its generated code is compiled once per structure
+    (in this process; numba's cache on disk, ``WEBLINE_ENGINE_CACHE`` or
+    ``~/.cache/webline/engine``, keeps it across processes)."""
     return Compiled(system)
 
 
