@@ -470,8 +470,7 @@ class Diagnosis:
 
         def energy(kap):
             A = est.harmonic_basis(est.scaled_angle(th, kap, ref), orders)
-            coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
-            return float(np.sum((A @ coef) ** 2))
+            return est.projected_energy(A, Y)
 
         e = np.array([energy(g) for g in grid])
         i = int(np.argmax(e))
