@@ -172,3 +172,16 @@ def test_model_forms_match_the_reference(form):
     assert eng.ok, eng.message
     ref = simulate_reference(s)
     assert _worst(eng, ref, load_cells(s)) < ENGINE_VS_REFERENCE
+
+
+def test_load_cell_noise_is_the_models_noise_at_the_sample_times():
+    path = ROOT / "scenarios" / "ewl_out_of_round.yaml"
+    noisy = load_system(path, {"experiment.duration": "1 s", "sensors.lc15.noise": "0.5 N"})
+    clean = without_noise(noisy)
+    a, b = engine.simulate(noisy), engine.simulate(clean)
+    c = engine.compile_system(noisy)
+    model = c.ref.models[c.ref.names.index("lc15")]
+    expected = np.array([model.noise(t) for t in a.time])
+    assert np.std(expected) > 0.3
+    # lc15 feeds no controller: the reading is the clean one plus the model's own noise sample
+    np.testing.assert_allclose(a["lc15.T"] - b["lc15.T"], expected, atol=1e-9)
