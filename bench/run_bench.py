@@ -17,7 +17,11 @@ Measures, in this order, and writes ``bench/results.json`` plus a table on stdou
    compared with a tight reference (rtol 1e-9) by the relative RMS error of the
    load-cell tensions (``orchestrator.accuracy``); the reference's loosest rtol
    that is at least as accurate as the co-simulation is timed;
-5. **diagnose** - ``webline diagnose`` of one 60 s run (the out-of-round EWL
+5. **engine** - the fast engine (``orchestrator.engine``: the monolithic ODE
+   compiled with numba, fixed-step RK4) against the co-simulation on
+   ``scenarios/ewl_out_of_round.yaml``: wall times (compile apart, from a cold
+   cache), error of both against the LSODA reference, a batch of variants;
+6. **diagnose** - ``webline diagnose`` of one 60 s run (the out-of-round EWL
    as "measured", diagnosed against the nominal EWL), in a subprocess with a
    time limit; "not available" if the command does not exist.
 
@@ -381,7 +385,82 @@ def bench_step_sweep(fmu_paths, duration, steps, repeats=2):
             "metric": "max over load cells of RMS(T - T_truth)/RMS(T_truth); rtf = simulated s / loop wall s"}
 
 
-# ---- 5: webline diagnose on one 60 s run ----------------------------------------------
+# ---- 5: the fast engine against the co-simulation ------------------------------------
+def bench_engine(fmu_paths, durations, repeats=3, batch=4):
+    """Fast engine vs co-simulation on the out-of-round EWL (noise off), per duration:
+    engine wall (fastest of ``repeats``; compile measured apart, from an empty cache), the
+    co-simulation's total wall (setup included, as a user waits for it), both errors
+    against the LSODA reference (rtol 1e-8); and a batch of ``batch`` variants (span
+    stiffness scaled) against as many single runs."""
+    import copy
+    import numpy as np
+    os.environ["WEBLINE_ENGINE_CACHE"] = tempfile.mkdtemp(prefix="webline_engine_cache_")
+    from webline.orchestrator import engine
+    from webline.orchestrator.accuracy import load_cells, relative_rms, without_noise
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.reference import simulate_reference
+
+    def system(duration):
+        return without_noise(load_system(SCEN / "ewl_out_of_round.yaml", {"experiment.duration": f"{duration} s"}))
+
+    s0 = system(0.05)
+    t = time.perf_counter()
+    compiled = engine.compile_system(s0)
+    engine.simulate(s0, compiled=compiled)  # numba compiles the generated code at the first call
+    compile_s = time.perf_counter() - t
+    rows = []
+    for duration in durations:
+        s = system(duration)
+        cols = load_cells(s)
+        c = engine.compile_system(s)
+        walls = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            res = engine.simulate(s, compiled=c)
+            walls.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        ref = simulate_reference(s)
+        ref_wall = time.perf_counter() - t
+        cs, loop, setup, total = run(s, fmu_paths)
+        e_ref = max(relative_rms(res[col], ref[col]) for col in cols)
+        cs_ref = max(relative_rms(cs[col], ref[col]) for col in cols)
+        n = min(len(cs.time), len(res.time))
+        e_cs = max(relative_rms(res[col][:n], cs[col][:n]) for col in cols)
+        rows.append({"duration_s": duration, "engine_wall_s": min(walls), "engine_step_s": res.info["h"],
+                     "engine_setup_s": c.setup_s, "cosim_total_wall_s": total, "cosim_loop_wall_s": loop,
+                     "reference_wall_s": ref_wall, "engine_rel_rms_vs_reference": e_ref,
+                     "cosim_rel_rms_vs_reference": cs_ref, "engine_rel_rms_vs_cosim": e_cs,
+                     "speedup_vs_cosim": total / min(walls),
+                     "speedup_vs_cosim_incl_setup": total / (min(walls) + c.setup_s),
+                     "speedup_vs_reference": ref_wall / min(walls)})
+    # batch of variants of one structure
+    d = durations[0]
+    base = system(d)
+    variants = []
+    for k in range(batch):
+        v = copy.deepcopy(base)
+        for comp in v.components:
+            if comp.model == "Span":
+                comp.parameters["EA"] = comp.parameters["EA"] * (1.0 + 0.05 * k)
+        variants.append(v)
+    comps = [engine.compile_system(v) for v in variants]
+    engine.simulate_batch(variants[:2], compiled=comps[:2])  # compile the parallel loop
+    t = time.perf_counter()
+    engine.simulate_batch(variants, compiled=comps)
+    batch_wall = time.perf_counter() - t
+    t = time.perf_counter()
+    for v, c in zip(variants, comps):
+        engine.simulate(v, compiled=c)
+    singles_wall = time.perf_counter() - t
+    return {"scenario": "scenarios/ewl_out_of_round.yaml (load-cell noise off)",
+            "compile_cold_s": compile_s, "n_states": int(compiled.x0.size), "rows": rows,
+            "batch": {"duration_s": d, "variants": batch, "batch_wall_s": batch_wall,
+                      "singles_wall_s": singles_wall, "threads": os.cpu_count()},
+            "metric": "max over load cells of RMS(T - T_ref)/RMS(T_ref); speedup = co-sim total wall / "
+                      "engine wall (compile apart: once per structure, cached on disk)"}
+
+
+# ---- 6: webline diagnose on one 60 s run ----------------------------------------------
 def bench_diagnose(fmu_paths, duration, timeout, workdir):
     from webline.cli import COMMANDS
     if "diagnose" not in COMMANDS:
@@ -390,9 +469,9 @@ def bench_diagnose(fmu_paths, duration, timeout, workdir):
     from webline.orchestrator.layout import load_system
     work = Path(workdir) / "diagnose"
     work.mkdir(parents=True, exist_ok=True)
-    # the "measured" run: the out-of-round EWL, recorded every 5 ms
+    # the "measured" run: the out-of-round EWL co-simulated, recorded every 2 ms (500 Hz)
     system = load_system(SCEN / "ewl_out_of_round.yaml",
-                         {"experiment.duration": f"{duration} s", "experiment.output_interval": "5 ms"})
+                         {"experiment.duration": f"{duration} s", "experiment.output_interval": "2 ms"})
     t = time.perf_counter()
     r, loop, _, _ = run(system, fmu_paths)
     gen_wall = time.perf_counter() - t
@@ -405,7 +484,7 @@ def bench_diagnose(fmu_paths, duration, timeout, workdir):
         "data: measured.csv\nname: ewl_out_of_round_60s\n"
         f"experiment:\n  line_speed: 200 ft/min\n  duration: {duration} s\n")
     # the lighter pipeline (no screening of backlash/compliance/sensor effects, no
-    # Gauss-Newton polish): every stage is a full-length co-simulation of the run
+    # Gauss-Newton polish); its model runs use the fast engine (diagnose --engine fast, the default)
     cmd = [sys.executable, "-m", "webline.cli", "diagnose", str(SCEN / "ewl.yaml"), str(work / "run.yaml"),
            "--out", str(work / "report"), *DIAGNOSE_FLAGS]
     t = time.perf_counter()
@@ -504,6 +583,19 @@ def table(res):
                 f"co-sim/reference wall = {c['cosim_total_over_reference_wall']:.2f}")
         else:
             add(f"   {c.get('note', '')}")
+    en = _section(res, "engine", "fast engine", add)
+    if en:
+        add("")
+        add(f"fast engine vs co-simulation ({en['scenario']}; compile from a cold cache "
+            f"{en['compile_cold_s']:.1f} s, {en['n_states']} states):")
+        for x in en["rows"]:
+            add(f"   {x['duration_s']:g} s: engine {x['engine_wall_s']:.3f} s (RK4 h {x['engine_step_s'] * 1e3:g} ms), "
+                f"co-sim {x['cosim_total_wall_s']:.1f} s -> {x['speedup_vs_cosim']:.0f}x; reference LSODA "
+                f"{x['reference_wall_s']:.1f} s; error vs reference: engine {_f(x['engine_rel_rms_vs_reference'])}, "
+                f"co-sim {_f(x['cosim_rel_rms_vs_reference'])}")
+        b = en["batch"]
+        add(f"   batch of {b['variants']} variants ({b['duration_s']:g} s): {b['batch_wall_s']:.3f} s vs "
+            f"{b['singles_wall_s']:.3f} s one by one")
     d = res.get("diagnose", {})
     if d:
         add("")
@@ -519,7 +611,7 @@ def table(res):
     return "\n".join(lines)
 
 
-SECTIONS = ("rtf", "fmu_share", "step_sweep", "scaling", "cosim_vs_reference", "diagnose")
+SECTIONS = ("rtf", "fmu_share", "step_sweep", "scaling", "cosim_vs_reference", "engine", "diagnose")
 
 
 def run_section(name, cfg, paths, work):
@@ -534,6 +626,8 @@ def run_section(name, cfg, paths, work):
         return bench_scaling(paths, cfg["scaling_sizes"], cfg["scaling_duration"], work, cfg["scaling_repeats"])
     if name == "cosim_vs_reference":
         return bench_cosim_vs_reference(paths, cfg["compare_duration"], cfg["compare_rtols"])
+    if name == "engine":
+        return bench_engine(paths, cfg["engine_durations"])
     if name == "diagnose":
         return bench_diagnose(paths, cfg["diagnose_duration"], cfg["diagnose_timeout"], work)
     raise KeyError(name)
@@ -570,6 +664,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="short runs only (smoke test of the bench)")
     ap.add_argument("--out", type=Path, default=OUT_JSON, help=f"results file (default {OUT_JSON})")
     ap.add_argument("--skip", nargs="*", default=[], choices=SECTIONS)
+    ap.add_argument("--only", nargs="*", default=[], choices=SECTIONS,
+                    help="run only these sections and update them in the existing results file")
     ap.add_argument("--diagnose-timeout", type=float, default=None, help="s (default: what is left of 10 min, >= 60 s)")
     args = ap.parse_args(argv)
     q = args.quick
@@ -580,6 +676,7 @@ def main(argv=None):
            "scaling_sizes": [10, 20] if q else [10, 20, 40, 80], "scaling_duration": 0.2 if q else 2.0,
            "scaling_repeats": 2 if q else 3, "compare_duration": 0.3 if q else 5.0,
            "compare_rtols": [1e-3, 1e-5] if q else [1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8],
+           "engine_durations": [0.5] if q else [10.0, 75.0],
            "diagnose_duration": 60.0, "budget_s": 600.0, "section_timeout_s": 900.0}
     t0 = time.perf_counter()
     res = {"machine": machine_info(), "config": cfg}
@@ -589,6 +686,8 @@ def main(argv=None):
         paths, fmu_hash = snapshot_fmus(work)
         res["fmu_source_hash"] = fmu_hash
         for name in SECTIONS:
+            if args.only and name not in args.only:
+                continue
             if name in args.skip or (q and name == "diagnose"):
                 res[name] = {"status": "skipped"}
                 continue
@@ -617,6 +716,17 @@ def main(argv=None):
                 res[name] = {"error": f"section timed out after {cfg['section_timeout_s']:.0f} s"}
             res[name]["bench_section_wall_s"] = time.perf_counter() - t
     res["bench_wall_s"] = time.perf_counter() - t0
+    if args.only:
+        # update the listed sections of the previous results; say when and where they came from
+        old = json.loads(args.out.read_text()) if args.out.exists() else {}
+        note = {"sections": list(args.only), "machine": res["machine"], "wall_s": res["bench_wall_s"]}
+        for name in args.only:
+            old[name] = res.get(name, {"status": "skipped"})
+            old[name]["updated"] = {k: note["machine"].get(k) for k in ("date", "git_commit")}
+        old.setdefault("partial_updates", []).append(note)
+        old.setdefault("machine", res["machine"])
+        old.setdefault("bench_wall_s", res["bench_wall_s"])
+        res = old
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = args.out.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(res, indent=1, default=float))

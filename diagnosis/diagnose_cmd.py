@@ -34,6 +34,8 @@ def parser():
                     help="time column of the data, for runs whose file has no 'time:' (default: detected)")
     ap.add_argument("--time-unit", metavar="UNIT", default=None,
                     help="unit of the time column when the header gives none (e.g. ms); 'time_unit:' in a run file wins")
+    ap.add_argument("--engine", choices=("fast", "cosim"), default="fast",
+                    help="model runs: the compiled monolithic ODE (fast, default) or the FMU co-simulation")
     ap.add_argument("--quiet", action="store_true", help="only warnings")
     return ap
 
@@ -52,7 +54,7 @@ def main(argv=None):
                   polish=not args.no_polish, other_effects=not args.no_other,
                   progress=not args.quiet and sys.stderr.isatty(),
                   jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1),
-                  time_column=args.time, time_unit=args.time_unit)
+                  time_column=args.time, time_unit=args.time_unit, engine=args.engine)
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:

@@ -47,6 +47,24 @@ def harmonic_basis(theta, orders):
     return np.column_stack(cols)
 
 
+def projected_energy(A, Y):
+    """||A coef||^2 of the least-squares fit of ``Y`` (N x m) on the columns of ``A`` (N x k):
+    the energy of ``Y`` that the basis explains, b^T G^-1 b with G = A^T A, b = A^T Y.
+
+    The normal equations instead of an SVD (``lstsq``): the speed-scale search calls this
+    hundreds of times on records of thousands of samples, and a harmonic basis over three
+    or more revolutions is well conditioned (near-orthogonal columns); a singular G (too
+    few samples) falls back to ``lstsq``."""
+    G = A.T @ A
+    b = A.T @ Y
+    try:
+        coef = np.linalg.solve(G, b)
+    except np.linalg.LinAlgError:
+        coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
+        return float(np.sum((A @ coef) ** 2))
+    return float(np.sum(b * coef))
+
+
 def fit_harmonics(y, theta, orders, mask=None):
     """Least-squares complex amplitudes ``Y_j`` of ``y`` on the orders of ``theta``.
 

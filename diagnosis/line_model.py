@@ -6,6 +6,12 @@ run's overrides), applies edits (eccentricity on an element, a drive made
 non-ideal, a parameter scaled), runs the fmpy master and returns the columns
 sampled on the run's time grid.
 
+Two engines run the model: ``engine="fast"`` (default) the compiled monolithic ODE
+of :mod:`orchestrator.engine` (the same physics models, RK4 in numba; variants of
+one structure run as one batch), ``engine="cosim"`` the FMU co-simulation
+(:func:`orchestrator.master.simulate`). :meth:`LineModel.confirm` runs the
+co-simulation once whatever the engine, for a final check of a result.
+
 Edits come in two forms: ``doc`` edits change the layout document itself
 (what ``refined_layout.yaml`` holds) and ``system`` edits are callables on the
 built System (screening only).
@@ -41,8 +47,13 @@ class Sim:
 
 
 class LineModel:
-    def __init__(self, layout_path, fmu_paths=None, progress=False, jobs=1):
+    ENGINES = ("fast", "cosim")
+
+    def __init__(self, layout_path, fmu_paths=None, progress=False, jobs=1, engine="fast"):
         from webline.diagnosis import layout_edit
+        if engine not in self.ENGINES:
+            raise ValueError(f"engine must be one of {', '.join(self.ENGINES)} (got {engine!r})")
+        self.engine = engine
         self.path = Path(layout_path)
         if not self.path.is_file():
             raise FileNotFoundError(f"{self.path}: layout not found")
@@ -116,15 +127,20 @@ class LineModel:
 
     # ------------------------------------------------------------- simulate ----
     def simulate(self, run, doc=None, edits=(), label=""):
-        from webline.orchestrator.master import simulate
-        system = self.system(run, doc, edits)
-        t0 = _time.perf_counter()
-        result = simulate(system, fmu_paths=self.fmu_paths, progress=self.progress)
-        wall = _time.perf_counter() - t0
+        """Sim of the layout (or derived layout ``doc``) under ``run``, with this model's engine."""
+        if self.engine == "fast":
+            return self._simulate_fast(run, doc, edits, label)
+        return self._simulate_cosim(run, doc, edits, label)
+
+    def confirm(self, run, doc=None, edits=(), label="confirm"):
+        """The same model run once by the FMU co-simulation (whatever ``self.engine``)."""
+        return self._simulate_cosim(run, doc, edits, label)
+
+    def _finish(self, run, system, result, wall, label, how):
         self.n_sims += 1
         self.sim_wall += wall
-        log.info("  simulated %s%s: %.3g s of line in %.1f s", run.name, f" ({label})" if label else "",
-                 run.t[-1], wall)
+        log.info("  simulated %s%s: %.3g s of line in %.2f s (%s)", run.name, f" ({label})" if label else "",
+                 run.t[-1], wall, how)
         ok = getattr(result, "ok", True)
         if not ok:
             raise SimulationFailed(f"simulation of run {run.name}{' (' + label + ')' if label else ''} "
@@ -132,6 +148,60 @@ class LineModel:
         t, cols = _columns(result)
         out = {k: np.interp(run.t, t, v) for k, v in cols.items()}  # run time is model time
         return Sim(system, out, wall)
+
+    def _simulate_fast(self, run, doc=None, edits=(), label=""):
+        from webline.orchestrator import engine
+        system = self.system(run, doc, edits)
+        t0 = _time.perf_counter()
+        result = engine.simulate(system)
+        return self._finish(run, system, result, _time.perf_counter() - t0, label, "fast engine")
+
+    def _simulate_cosim(self, run, doc=None, edits=(), label=""):
+        from webline.orchestrator.master import simulate
+        system = self.system(run, doc, edits)
+        t0 = _time.perf_counter()
+        result = simulate(system, fmu_paths=self.fmu_paths, progress=self.progress)
+        return self._finish(run, system, result, _time.perf_counter() - t0, label, "co-simulation")
+
+    def _simulate_many_fast(self, jobs):
+        """Fast engine: jobs whose systems share structure and output times run as one batch."""
+        from webline.orchestrator import engine
+        from webline.orchestrator.reference import output_times
+        out = [None] * len(jobs)
+        groups = {}
+        systems = []
+        for k, (run, doc, label) in enumerate(jobs):
+            try:
+                system = self.system(run, doc)
+                compiled = engine.compile_system(system)
+                key = (compiled.structure, tuple(output_times(system.experiment)), float(system.experiment.start))
+            except (SimulationFailed, ValueError) as exc:
+                out[k] = exc
+                systems.append(None)
+                continue
+            systems.append((system, compiled))
+            groups.setdefault(key, []).append(k)
+        for idx in groups.values():
+            t0 = _time.perf_counter()
+            try:
+                if len(idx) == 1:
+                    results = [engine.simulate(systems[idx[0]][0], compiled=systems[idx[0]][1])]
+                else:
+                    results = engine.simulate_batch([systems[k][0] for k in idx],
+                                                    compiled=[systems[k][1] for k in idx])
+            except ValueError as exc:
+                for k in idx:
+                    out[k] = exc
+                continue
+            wall = (_time.perf_counter() - t0) / len(idx)
+            for k, result in zip(idx, results):
+                run, doc, label = jobs[k]
+                try:
+                    out[k] = self._finish(run, systems[k][0], result, wall, label,
+                                          f"fast engine, batch of {len(idx)}" if len(idx) > 1 else "fast engine")
+                except SimulationFailed as exc:
+                    out[k] = exc
+        return out
 
     def simulate_many(self, jobs):
         """Simulate ``jobs`` = [(run, doc, label)]; returns [Sim] in order (or the
@@ -141,6 +211,8 @@ class LineModel:
         every worker loads its own FMU instances; pythonfmu's module names are
         process-global), the pool kept for the whole diagnosis."""
         jobs = list(jobs)
+        if self.engine == "fast":
+            return self._simulate_many_fast(jobs)
         if self.jobs <= 1 or len(jobs) < 2:
             out = []
             for run, doc, label in jobs:
@@ -174,14 +246,14 @@ class LineModel:
                 return out + self.simulate_many(jobs[done:])
             self.n_sims += 1
             self.sim_wall += sim.wall
-            log.info("  simulated %s%s: %.3g s of line in %.1f s (worker)", run.name,
+            log.info("  simulated %s%s: %.3g s of line in %.1f s (co-simulation worker)", run.name,
                      f" ({label})" if label else "", run.t[-1], sim.wall)
             out.append(sim)
         return out
 
 
 def _worker_simulate(layout, fmu_paths, run, doc, label):
-    model = LineModel(layout, {k: Path(v) for k, v in fmu_paths.items()})
+    model = LineModel(layout, {k: Path(v) for k, v in fmu_paths.items()}, engine="cosim")
     try:
         return model.simulate(run, doc, label=label)
     finally:

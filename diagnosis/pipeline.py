@@ -61,9 +61,10 @@ class Options:
     other_effects: bool = True       # screen non-periodic effects when a significant residual remains
     fmu_paths: dict = None
     progress: bool = False
-    jobs: int = 1                    # simulations in parallel (worker processes)
     time_column: str = None          # data time column for runs that do not name one (None: detected)
     time_unit: str = None            # its unit when the header gives none
+    jobs: int = 1                    # simulations in parallel (worker processes; co-simulation engine)
+    engine: str = "fast"             # "fast": compiled monolithic ODE; "cosim": FMU co-simulation
 
 
 class DiagnoseError(ValueError):
@@ -152,7 +153,8 @@ class Diagnosis:
             load_system(self.layout_path)
         except LayoutError as exc:
             raise DiagnoseError(f"invalid layout:\n{exc}") from None
-        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress, jobs=self.opt.jobs)
+        self.model = LineModel(self.layout_path, self.opt.fmu_paths, progress=self.opt.progress, jobs=self.opt.jobs,
+                               engine=self.opt.engine)
         self.ctx = []
         names = set()
         for paths, fit in ((self.run_paths, True), (self.holdout_paths, False)):
@@ -478,8 +480,7 @@ class Diagnosis:
 
         def energy(kap):
             A = est.harmonic_basis(est.scaled_angle(th, kap, ref), orders)
-            coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
-            return float(np.sum((A @ coef) ** 2))
+            return est.projected_energy(A, Y)
 
         e = np.array([energy(g) for g in grid])
         i = int(np.argmax(e))

@@ -9,6 +9,11 @@ is the relative RMS error of each load-cell reading (components of model
 
     rel_rms = sqrt(mean((T_cosim - T_ref)^2)) / sqrt(mean(T_ref^2))
 
+The fast engine (:mod:`orchestrator.engine`, the same ODE compiled and integrated
+with fixed-step RK4) is measured the same way and reported as one more row
+(``engine``), with its wall time; its error shows what the co-simulation's
+costs buy.
+
 Load-cell noise is switched off (``noise_std`` = 0) for the comparison unless
 asked otherwise: it is a function of time only, so it would be the same in
 both, but it makes the reference ODE needlessly rough wherever it feeds a
@@ -67,7 +72,7 @@ def _result_column(result, name):
 
 
 def measure(system, steps=DEFAULT_STEPS, algorithms=DEFAULT_ALGORITHMS, columns=None, rtol=1e-8,
-            keep_noise=False, simulate=None, log=None):
+            keep_noise=False, simulate=None, log=None, engine=True):
     """Run the co-simulation per (step, algorithm) and compare with the reference.
 
     ``columns``: compared columns (default: every load-cell tension);
@@ -75,7 +80,7 @@ def measure(system, steps=DEFAULT_STEPS, algorithms=DEFAULT_ALGORITHMS, columns=
     called as ``simulate(system)`` with ``system.experiment.step``/``algorithm`` set).
     Returns a JSON-ready report: ``{"columns", "reference": {...}, "runs": [{"step",
     "algorithm", "status", "wall_s", "rel_rms": {col: x}, "max_abs": {col: x},
-    "worst"}]}``.
+    "worst"}], "engine": {...} (same fields; with ``engine``)}``.
     """
     from webline.orchestrator.reference import solve_reference
     log = log or (lambda *a: None)
@@ -97,6 +102,8 @@ def measure(system, steps=DEFAULT_STEPS, algorithms=DEFAULT_ALGORITHMS, columns=
     solution = solve_reference(ref_system, rtol=rtol)
     ref_info = dict(solution.info, wall_s=_time.perf_counter() - wall)
     log(f"reference done in {ref_info['wall_s']:.1f} s ({ref_info['nfev']} RHS evaluations)")
+
+    engine_run = _measure_engine(ref_system, solution, columns, log) if engine else None
 
     runs = []
     for h in steps:
@@ -122,9 +129,34 @@ def measure(system, steps=DEFAULT_STEPS, algorithms=DEFAULT_ALGORITHMS, columns=
                 run["rel_rms"] = {c: math.inf for c in columns}
             run["worst"] = max(run["rel_rms"].values())
             runs.append(run)
-    return {"columns": columns, "steps": steps, "algorithms": list(algorithms),
-            "start": exp.start, "stop": exp.stop, "keep_noise": keep_noise,
-            "reference": {k: v for k, v in ref_info.items()}, "runs": runs}
+    report = {"columns": columns, "steps": steps, "algorithms": list(algorithms),
+              "start": exp.start, "stop": exp.stop, "keep_noise": keep_noise,
+              "reference": {k: v for k, v in ref_info.items()}, "runs": runs}
+    if engine_run is not None:
+        report["engine"] = engine_run
+    return report
+
+
+def _measure_engine(system, solution, columns, log):
+    """The fast engine's row: error at the experiment's output times, wall time (compile apart)."""
+    from webline.orchestrator import engine
+    log("fast engine (compiled monolithic ODE, RK4)")
+    t0 = _time.perf_counter()
+    compiled = engine.compile_system(system)
+    compile_s = _time.perf_counter() - t0
+    engine.simulate(system, compiled=compiled)  # first call: numba compiles the integrator if not cached
+    t0 = _time.perf_counter()
+    result = engine.simulate(system, compiled=compiled)
+    run = {"step": result.info["h"], "algorithm": "engine", "wall_s": _time.perf_counter() - t0,
+           "compile_s": compile_s, "status": result.status, "message": result.message,
+           "n_samples": int(result.time.size), "rel_rms": {}, "max_abs": {}}
+    ref = solution.sample(result.time)
+    for col in columns:
+        x, r = _result_column(result, col), ref[col]
+        run["rel_rms"][col] = relative_rms(x, r) if result.ok else math.inf
+        run["max_abs"][col] = float(np.max(np.abs(x - r))) if np.all(np.isfinite(x)) else math.inf
+    run["worst"] = max(run["rel_rms"].values())
+    return run
 
 
 def fmt_step(h):
@@ -145,6 +177,11 @@ def markdown_table(report):
     for r in report["runs"]:
         cells = [fmt_step(r["step"]), r["algorithm"], *[_fmt(r["rel_rms"][c]) for c in cols],
                  _fmt(r["worst"]), f"{r['wall_s']:.1f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    e = report.get("engine")
+    if e:
+        cells = [fmt_step(e["step"]), "fast engine (RK4)", *[_fmt(e["rel_rms"][c]) for c in cols],
+                 _fmt(e["worst"]), f"{e['wall_s']:.3g}"]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -34,6 +34,7 @@ def main(argv=None):
     ap.add_argument("--rtol", type=float, default=1e-8, help="reference solver tolerance (default %(default)g)")
     ap.add_argument("--columns", help="compare these columns instead of the load cells (comma-separated)")
     ap.add_argument("--keep-noise", action="store_true", help="keep load-cell noise (default: noise_std = 0)")
+    ap.add_argument("--no-engine", action="store_true", help="leave out the fast engine's row")
     ap.add_argument("--json", type=Path, help="report file (default out/accuracy/<layout>.json)")
     args = ap.parse_args(argv)
     try:
@@ -56,7 +57,8 @@ def main(argv=None):
     columns = [c.strip() for c in args.columns.split(",")] if args.columns else None
     try:
         report = measure(system, steps, algorithms, columns=columns, rtol=args.rtol,
-                         keep_noise=args.keep_noise, log=lambda m: print(m, file=sys.stderr))
+                         keep_noise=args.keep_noise, log=lambda m: print(m, file=sys.stderr),
+                         engine=not args.no_engine)
     except ValueError as e:
         print(f"webline accuracy: {e}", file=sys.stderr)
         return 2

@@ -82,3 +82,17 @@ def test_steady_mask_excludes_ramps():
     m = est.steady_mask(v, FS)
     assert not m[t < 4.5].any() and m[t > 6].all()
     assert est.windows_of(m, t)[0][0] == pytest.approx(5.0, abs=0.6)
+
+
+def test_projected_energy_equals_the_least_squares_fit():
+    import numpy as np
+    from webline.diagnosis import estimate as est
+    rng = np.random.default_rng(3)
+    th = np.linspace(0.0, 2 * np.pi * 7.3, 900)
+    A = est.harmonic_basis(th, [1, 2, 3])
+    inside = A @ rng.normal(size=(6, 2))
+    Y = inside + rng.normal(size=(900, 2))
+    coef, *_ = np.linalg.lstsq(A, Y, rcond=None)
+    assert est.projected_energy(A, Y) == pytest.approx(float(np.sum((A @ coef) ** 2)), rel=1e-10)
+    # a signal in the span of the basis is explained entirely
+    assert est.projected_energy(A, inside) == pytest.approx(float(np.sum(inside ** 2)), rel=1e-10)

@@ -1,0 +1,187 @@
+"""The fast engine (orchestrator.engine) against the monolithic reference and the co-simulation.
+
+Tolerances. The engine integrates the reference's ODE with classical RK4 at a
+fixed step h <= 1 ms and h <= 0.5/rho (rho the Jacobian's spectral radius). Its
+global error is O(h^4): on the line's tension-carrying modes (|lambda| h <= 0.1)
+the relative error per unit time is about (lambda h)^4/120 < 1e-6, and the
+reference (LSODA, rtol 1e-8) adds about 1e-8; the 0.1 % bound of issue 10 is
+therefore met with a wide margin, and the tighter 1e-5 bound checked here would
+still fail if one model's glue differed from its class (a wrong sign or a
+missing term changes the tensions by far more). Against the co-simulation the
+bound is the accuracy table's 0.5 % (the co-simulation's own error at its
+default macro step).
+"""
+import copy
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from webline.orchestrator import engine
+from webline.orchestrator.accuracy import load_cells, relative_rms, without_noise
+from webline.orchestrator.layout import load_system
+from webline.orchestrator.reference import simulate_reference
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIOS = sorted(p for p in list((ROOT / "scenarios").glob("*.yaml")) + list((ROOT / "scenarios" / "paper").glob("*.yaml"))
+                   if "sweep" not in p.name)
+DRIVE = {"motor_inertia": "0.02 kg*m^2", "stiffness": "3000 N*m/rad", "damping": "0.5 N*m*s/rad",
+         "backlash": "0.2 deg"}
+ENGINE_VS_REFERENCE = 1e-5
+COSIM_TOLERANCE = 5e-3
+
+
+def _system(path, duration=2.0, **overrides):
+    ov = {"experiment.duration": f"{duration} s", **overrides}
+    return without_noise(load_system(path, ov))
+
+
+def _worst(a, b, cols):
+    return max(relative_rms(a[c], b[c]) for c in cols)
+
+
+def test_noise_matches_the_load_cell_model():
+    from webline.physics.load_cell import standard_normal
+    f = engine.nb()["standard_normal"]
+    for seed in (0, 1, 7, 2 ** 40 + 3):
+        for t in (0.0, 1e-6, 0.002, 0.5, 12.345678, 75.0):
+            assert f(np.int64(seed), t) == pytest.approx(standard_normal(seed, t), abs=1e-15)
+
+
+def test_profile_matches_the_physics_function():
+    from webline.physics.profile import profile_value
+    ts, ys = [0.0, 1.0, 1.0, 3.0], [2.0, 4.0, 6.0, 0.0]
+    f = engine.nb()["profile_value"]
+    for t in (-1.0, 0.0, 0.5, 1.0 - 1e-6, 1.0, 2.0, 3.0, 9.0):
+        assert f(np.array(ts), np.array(ys), t) == profile_value(ts, ys, t)
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_engine_matches_the_reference(path):
+    s = _system(path)
+    eng = engine.simulate(s)
+    assert eng.ok, eng.message
+    ref = simulate_reference(s)
+    cols = load_cells(s)
+    assert cols
+    np.testing.assert_allclose(eng.time, ref.time)
+    assert _worst(eng, ref, cols) < ENGINE_VS_REFERENCE
+    assert eng.meta["kind"] == "engine" and eng.columns == ref.columns
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_engine_matches_the_cosimulation(path):
+    from webline.orchestrator.master import simulate
+    s = _system(path)
+    cs = simulate(s, progress=False)
+    assert cs.ok, cs.message
+    eng = engine.simulate(s, t_eval=cs.time)
+    assert _worst(eng, cs, load_cells(s)) < COSIM_TOLERANCE
+
+
+def test_non_ideal_drive_matches_the_reference():
+    s = _system(ROOT / "scenarios" / "ewl_out_of_round.yaml",
+                **{"drives.speed_loops.sw_leader.drive": DRIVE})
+    c = engine.compile_system(s)
+    assert "sw_leader.theta_motor" in c.state_names
+    eng = engine.simulate(s, compiled=c)
+    ref = simulate_reference(s)
+    assert _worst(eng, ref, load_cells(s)) < ENGINE_VS_REFERENCE
+    # the motor speed rings through the backlash: a dead-zone crossing inside a fixed step is
+    # integrated to first order only, so its bound is looser than the tensions'
+    assert relative_rms(eng["sw_leader.omega_motor"], ref["sw_leader.omega_motor"]) < 1e-4
+
+
+def test_batch_equals_single_runs():
+    base = _system(ROOT / "scenarios" / "ewl_out_of_round.yaml", duration=1.0)
+    variants = []
+    for scale in (1.0, 0.8, 1.25):
+        s = copy.deepcopy(base)
+        for comp in s.components:
+            if comp.model == "Span":
+                comp.parameters["EA"] = comp.parameters.get("EA", 2.0e4) * scale
+        variants.append(s)
+    assert len({engine.structure_key(s) for s in variants}) == 1
+    batch = engine.simulate_batch(variants)
+    singles = [engine.simulate(s) for s in variants]
+    cols = load_cells(base)
+    for b, r in zip(batch, singles):
+        assert b.ok
+        for c in cols:
+            np.testing.assert_allclose(b[c], r[c], rtol=1e-12, atol=0.0)
+    # the variants differ: the batch did not run one parameter set three times
+    assert relative_rms(batch[1][cols[0]], batch[2][cols[0]]) > 1e-6
+
+
+def test_steady_line_stays_steady():
+    s = _system(ROOT / "scenarios" / "ewl.yaml", duration=3.0)
+    eng = engine.simulate(s)
+    c = engine.compile_system(s)
+    # the layout starts the line at its operating point: the state derivative is ~0 there
+    dx = c.rhs_numpy(s.experiment.start, c.x0)
+    # (angles turn; the rolls' radii change by one thickness per turn, so their speeds follow)
+    rolls = {n for n, m in zip(c.ref.names, c.ref.system.components) if m.model in ("UnwindRoll", "RewindRoll")}
+    moving = [i for i, n in enumerate(c.state_names)
+              if n.endswith((".theta", ".theta_motor")) or n.split(".")[0] in rolls]
+    rest = np.delete(dx, moving)
+    assert np.max(np.abs(rest)) < 1e-9 * max(1.0, float(np.max(np.abs(c.x0))))
+    for col in load_cells(s):
+        T = eng[col]
+        assert np.max(np.abs(T - T[0])) < 1e-3 * abs(T[0])
+
+
+def test_empty_roll_fails_cleanly():
+    s = _system(ROOT / "scenarios" / "ewl.yaml", duration=1.0)
+    c = engine.compile_system(s)
+    i = c.state_names.index("unwind.R")
+    R_core = c.ref.models[c.ref.names.index("unwind")].R_core
+    c.x0[i] = R_core * (1.0 + 1e-7)
+    res = engine.simulate(s, compiled=c)
+    assert res.status == "failed"
+    assert "unwind" in res.message and "empty" in res.message
+    assert res.time.size < 10
+
+
+def test_bad_t_eval_is_refused():
+    s = _system(ROOT / "scenarios" / "ewl.yaml", duration=0.2)
+    with pytest.raises(ValueError, match="increasing"):
+        engine.simulate(s, t_eval=[0.0, 0.1, 0.05])
+    with pytest.raises(ValueError, match="before the experiment"):
+        engine.simulate(s, t_eval=[-1.0, 0.1])
+
+
+LOOPS = ("unwind", "sw_leader", "sw_follower", "pull_roll", "rewind")
+FORMS = {  # model-form options (docs/layout.md); skipped where this checkout does not have them yet
+    "damping": {"web.damping": "0.02 s"},
+    "acceleration_ff_current_lag": {**{f"drives.speed_loops.{k}.acceleration_feedforward": True for k in LOOPS},
+                                    **{f"drives.speed_loops.{k}.current_lag": "5 ms" for k in LOOPS}},
+    "feedforward_reference": {f"drives.speed_loops.{k}.feedforward": "reference" for k in LOOPS},
+    "feedforward_none": {f"drives.speed_loops.{k}.feedforward": "none" for k in LOOPS},
+    "filter_order_2": {f"sensors.{s}.filter_order": 2 for s in ("lc9", "lc15", "lc19")},
+}
+
+
+@pytest.mark.parametrize("form", sorted(FORMS))
+def test_model_forms_match_the_reference(form):
+    try:
+        s = _system(ROOT / "scenarios" / "paper" / "f_accel_decel.yaml", duration=3.0, **FORMS[form])
+    except (ValueError, KeyError) as exc:
+        pytest.skip(f"layout option not in this checkout: {exc}")
+    eng = engine.simulate(s)
+    assert eng.ok, eng.message
+    ref = simulate_reference(s)
+    assert _worst(eng, ref, load_cells(s)) < ENGINE_VS_REFERENCE
+
+
+def test_load_cell_noise_is_the_models_noise_at_the_sample_times():
+    path = ROOT / "scenarios" / "ewl_out_of_round.yaml"
+    noisy = load_system(path, {"experiment.duration": "1 s", "sensors.lc15.noise": "0.5 N"})
+    clean = without_noise(noisy)
+    a, b = engine.simulate(noisy), engine.simulate(clean)
+    c = engine.compile_system(noisy)
+    model = c.ref.models[c.ref.names.index("lc15")]
+    expected = np.array([model.noise(t) for t in a.time])
+    assert np.std(expected) > 0.3
+    # lc15 feeds no controller: the reading is the clean one plus the model's own noise sample
+    np.testing.assert_allclose(a["lc15.T"] - b["lc15.T"], expected, atol=1e-9)
