@@ -233,6 +233,11 @@ class Slave:
 
         self.get_state = get_range(0, self.n_state) if self.n_state else None
         self.get_rest = get_range(self.n_state, self.n_state + self.n_rest) if self.n_rest else None
+        # on a recording step the record-only state outputs are read with the coupled ones, in
+        # the same fmi2GetReal right after the step (they depend on no connected input, so they
+        # do not change until the next step)
+        n_all = self.n_state + self.n_rest
+        self.get_all = get_range(0, n_all) if n_all else None
         self.get_range = get_range
         in_vrs = (c_uint * len(self.inputs))(*(vr[n].valueReference for n in self.inputs))
         self._in_vrs = in_vrs
@@ -300,6 +305,9 @@ class Plan:
         self.gs_order = [(chains[s.name], s) for s in slaves]
         self.gauss_seidel = False  # set by simulate: complete() then resolves the groups
         self.rate_groups, self.other_groups = [], list(groups)  # set by plan_coupling
+        self.rest_read = False  # complete(): the record-only state outputs were read after the step
+        self.record_next = True  # the step about to run ends on a recording point (set by simulate)
+        self.sink_set = [True] * len(sinks)  # set by plan_sinks: a sink's slave needs its inputs set
         self.columns, self.units, self.descriptions = columns, units, descriptions
 
 
@@ -552,6 +560,28 @@ def resolve(groups, y, u, t):
             _fail(s, "fmi2GetReal", st, t)
 
 
+def plan_sinks(plan, before):
+    """Which sinks need their slave's inputs set again when recorded after ``before`` (the
+    groups resolved, in order, since the last step): none when the slave's inputs were last
+    set while resolving one of its own groups in ``before`` and no input of it is read from a
+    group resolved after that (its FMU already holds exactly these input values)."""
+    pos = {}  # slave name -> index in before of its last group
+    for k, g in enumerate(before):
+        pos[g.slave.name] = k
+    later_y = {}  # index in before -> set of y indices written by the groups after it
+    flags = []
+    for g in plan.sinks:
+        s = g.slave
+        k = pos.get(s.name)
+        if k is None or s.src is None or not len(s.src):
+            flags.append(True)
+            continue
+        if k not in later_y:
+            later_y[k] = {g2.slave.y0 + i for g2 in before[k + 1:] for i in range(g2.a, g2.b)}
+        flags.append(bool(later_y[k] & set(int(j) for j in s.src)))
+    plan.sink_set = flags
+
+
 def jacobi_step(plan, t, h):
     """All slaves step from the same input values at ``t``; then outputs at ``t + h``."""
     y, u = plan.y, plan.u
@@ -568,8 +598,9 @@ def jacobi_step(plan, t, h):
             _fail(s, "fmi2DoStep", st, t)
     t1 = t + h
     for s in plan.slaves:
-        if s.get_state is not None:
-            st = s.get_state()
+        get = s.get_all if plan.record_next else s.get_state
+        if get is not None:
+            st = get()
             if st:
                 _fail(s, "fmi2GetReal", st, t1)
     resolve(plan.groups, y, u, t1)
@@ -584,21 +615,23 @@ def gauss_seidel_step(plan, t, h):
     y, u = plan.y, plan.u
     ct, ch, one = c_double(t), c_double(h), c_int(1)
     t1 = t + h
-    for chain, s in plan.gs_order:
+    for chain, s, set_inputs, dst, src, back_v, back_r, do_step, get, get_all in plan.gs_loop:
         if chain:
             resolve(chain, y, u, t)
-        if s.set_inputs is not None:
-            u[s.dst] = y[s.src]
-            if s.back_v is not None:
-                u[s.back_v] -= h * u[s.back_r]
-            st = s.set_inputs()
+        if set_inputs is not None:
+            u[dst] = y[src]
+            if back_v is not None:
+                u[back_v] -= h * u[back_r]
+            st = set_inputs()
             if st:
                 _fail(s, "fmi2SetReal", st, t)
-        st = s.do_step(ct, ch, one)
+        st = do_step(ct, ch, one)
         if st:
             _fail(s, "fmi2DoStep", st, t)
-        if s.get_state is not None:
-            st = s.get_state()
+        if plan.record_next:
+            get = get_all
+        if get is not None:
+            st = get()
             if st:
                 _fail(s, "fmi2GetReal", st, t1)
     if plan.rate_groups:
@@ -609,14 +642,25 @@ def complete(plan, t):
     """Make every output consistent at ``t`` before it is recorded: the feed-through
     groups (Gauss-Seidel leaves them to the next step) and the outputs nothing
     depends on (read only here)."""
+    y, u = plan.y, plan.u
     if plan.gauss_seidel:  # the rate groups were resolved at the end of the step
-        resolve(plan.other_groups, plan.y, plan.u, t)
-    for s in plan.slaves:
-        if s.get_rest is not None:
-            st = s.get_rest()
+        resolve(plan.other_groups, y, u, t)
+    if not plan.rest_read:  # else read with the state outputs right after the step
+        for s in plan.slaves:
+            if s.get_rest is not None:
+                st = s.get_rest()
+                if st:
+                    _fail(s, "fmi2GetReal", st, t)
+    for g, needs_set in zip(plan.sinks, plan.sink_set):
+        s = g.slave
+        if needs_set:
+            u[s.dst] = y[s.src]
+            st = s.set_inputs()
             if st:
-                _fail(s, "fmi2GetReal", st, t)
-    resolve(plan.sinks, plan.y, plan.u, t)
+                _fail(s, "fmi2SetReal", st, t)
+        st = g.get()
+        if st:
+            _fail(s, "fmi2GetReal", st, t)
 
 
 STEP = {"jacobi": jacobi_step, "gauss-seidel": gauss_seidel_step}
@@ -707,6 +751,10 @@ def simulate(system, fmu_paths=None, progress=True):
                 s.bind(plan.y, plan.u)
             for g in (*plan.groups, *plan.sinks):
                 g.get = g.slave.get_range(g.a, g.b)
+            plan.gs_loop = [(chain, s, s.set_inputs, s.dst, s.src, s.back_v, s.back_r, s.do_step,
+                             s.get_state, s.get_all) for chain, s in plan.gs_order]
+            # groups resolved between a step and complete(), in order
+            plan_sinks(plan, plan.rate_groups + plan.other_groups if plan.gauss_seidel else plan.groups)
             setup_time = _time.perf_counter() - t_setup
             t_loop = _time.perf_counter()
             y = plan.y
@@ -716,7 +764,10 @@ def simulate(system, fmu_paths=None, progress=True):
                     if st:
                         _fail(s, "fmi2GetReal", st, t0)
             resolve(plan.groups, y, plan.u, t0)
+            plan.rest_read = False
+            sink_set, plan.sink_set = plan.sink_set, [True] * len(plan.sinks)
             complete(plan, t0)
+            plan.sink_set, plan.rest_read = sink_set, True
             record = recorder.record
             record(t0, y)
             bar = _progress_bar(n_steps, progress)
@@ -724,6 +775,7 @@ def simulate(system, fmu_paths=None, progress=True):
             while k < n_steps:
                 stop_k = min(n_steps, k + CHECK_EVERY)
                 while k < stop_k:
+                    plan.record_next = (k + 1) % every == 0
                     step(plan, t0 + k * h, h)
                     k += 1
                     if k % every == 0:
