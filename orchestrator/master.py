@@ -702,8 +702,13 @@ def _first_non_finite(rec, first, columns, slaves):
             "(diverged)")
 
 
-def simulate(system, fmu_paths=None, progress=True):
+def simulate(system, fmu_paths=None, progress=True, compiled=True):
     """Run ``system`` and return a :class:`~orchestrator.results.Result`.
+
+    ``compiled``: replay the planned macro step in compiled code
+    (:mod:`orchestrator.cloop`) when a C compiler is available; False (or the
+    environment variable ``WEBLINE_MASTER_LOOP=python``) keeps the Python loop. Both
+    make the same FMI calls in the same order and give bit-identical results.
 
     ``fmu_paths``: {model name: .fmu path}; default: ``fmus.build.build_all()``
     (builds the FMUs if they are out of date). Raises :class:`SetupError` for a
@@ -772,14 +777,36 @@ def simulate(system, fmu_paths=None, progress=True):
             record(t0, y)
             bar = _progress_bar(n_steps, progress)
             checked = 0
+            runner = None
+            if compiled:
+                from webline.orchestrator import cloop
+                if cloop.available():
+                    runner = cloop.Runner(plan, plan.gauss_seidel)
+            meta["master_loop"] = "compiled" if runner is not None else "python"
             while k < n_steps:
                 stop_k = min(n_steps, k + CHECK_EVERY)
-                while k < stop_k:
+                while runner is None and k < stop_k:
                     plan.record_next = (k + 1) % every == 0
                     step(plan, t0 + k * h, h)
                     k += 1
                     if k % every == 0:
                         complete(plan, t0 + k * h)
+                        record(t0 + k * h, y)
+                while runner is not None and k < stop_k:
+                    # the same steps in compiled code: plain steps up to the next recording
+                    # point, then one step that ends on it (reads what complete() reads)
+                    nxt = min(stop_k, (k // every + 1) * every)
+                    rec = nxt % every == 0
+                    n_plain = nxt - k - rec
+                    st, done, sl, fn, at_end = runner.run(runner.plain, t0, h, k, n_plain)
+                    if not st and rec:
+                        st, done, sl, fn, at_end = runner.run(runner.record, t0, h, k + n_plain, 1)
+                        done += n_plain
+                    if st:
+                        k += done
+                        _fail(sl, fn, st, t0 + k * h + (h if at_end else 0.0))
+                    k = nxt
+                    if rec:
                         record(t0 + k * h, y)
                 bad = _first_non_finite(recorder, checked, plan.columns, slaves)
                 if bad:

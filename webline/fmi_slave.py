@@ -376,6 +376,7 @@ class ElementSlave(Fmi2Slave):
         self._slot = {a: (True, i) for i, a in enumerate(self._input_attrs)}
         self._slot.update({a: (False, i) for i, a in enumerate(self._output_attrs)})
         self._vr = None
+        self._get_fast, self._set_fast = {}, {}  # value-reference tuple -> indices (get_real, set_real)
         self._step = {1: rk4_1, 2: rk4_2, 3: rk4_3}.get(len(self.model.STATES), rk4_step)
         self.x = list(self.model.initial_state())
         try:
@@ -456,6 +457,21 @@ class ElementSlave(Fmi2Slave):
         return tables
 
     def get_real(self, vrs):
+        # A master asks for the same value-reference lists every step: after initialisation
+        # a list of outputs only is answered from a cache (indices into self._y).
+        fast = self.__dict__.get("_get_fast")
+        if fast is not None:
+            key = tuple(vrs)
+            hit = fast.get(key)
+            if hit is not None:
+                if hit[0] and self.dirty:
+                    self._refresh_if_dirty()
+                y = self._y
+                return [y[i] for i in hit[1]]
+            table = self._vr or self._vr_tables()
+            rows = [table[vr] for vr in key]
+            if all(r[2] == 2 for r in rows):
+                fast[key] = (any(r[1] for r in rows), [r[3] for r in rows])
         table = self.__dict__.get("_vr") or self._vr_tables()
         out = []
         for vr in vrs:
@@ -471,6 +487,21 @@ class ElementSlave(Fmi2Slave):
         return out
 
     def set_real(self, vrs, values):
+        fast = self.__dict__.get("_set_fast")  # inputs only, after initialisation: their indices
+        if fast is not None:
+            key = tuple(vrs)
+            idx = fast.get(key)
+            if idx is not None:
+                u, t_set, now = self._u, self._t_set, self.time
+                for i, value in zip(idx, values):
+                    u[i] = value
+                    t_set[i] = now
+                self.dirty = True
+                return
+            table = self._vr or self._vr_tables()
+            rows = [table[vr] for vr in key]
+            if all(r[2] == 1 for r in rows):
+                fast[key] = [r[3] for r in rows]
         table = self.__dict__.get("_vr") or self._vr_tables()
         now = self.time
         u, t_set = self.__dict__.get("_u"), self.__dict__.get("_t_set")
