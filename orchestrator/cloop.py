@@ -20,6 +20,7 @@ It is loaded with :class:`ctypes.PyDLL`: the Python lock stays held, so the Pyth
 """
 import ctypes
 import hashlib
+import math
 import os
 import shutil
 import subprocess
@@ -46,15 +47,19 @@ typedef struct {
     long m;               /* gather, anchor: how many */
 } op_t;
 
-/* Run n_steps macro steps k0, k0 + 1, ... of the plan ops (time t0 + k h). Returns 0, or
-   the first status other than OK and Warning; then where[0] = the op, where[1] = the
+/* Run n_steps macro steps k0, k0 + 1, ... (time t0 + k h) of a run of n_total steps; step k
+   runs program progs[k % period] (multi-rate instances step in some phases only). Returns 0,
+   or the first status other than OK and Warning; then where[0] = the op, where[1] = the
    steps completed before the failing one. */
-int webline_run(const op_t *ops, long n_ops, double *y, double *u, double t0, double h,
-                long k0, long n_steps, long *where)
+int webline_run(const op_t *const *progs, const long *n_ops, long period, double *y, double *u,
+                double t0, double h, long k0, long n_steps, long n_total, long *where)
 {
     for (long i = 0; i < n_steps; i++) {
-        double t = t0 + (double)(k0 + i) * h;
-        for (long k = 0; k < n_ops; k++) {
+        long ks = k0 + i;
+        double t = t0 + (double)ks * h;
+        const op_t *ops = progs[ks % period];
+        long n = n_ops[ks % period];
+        for (long k = 0; k < n; k++) {
             const op_t *o = &ops[k];
             int st = 0;
             switch (o->code) {
@@ -68,7 +73,12 @@ int webline_run(const op_t *ops, long n_ops, double *y, double *u, double t0, do
                 st = ((set_fn)o->fn)(o->c, o->vr, o->n, o->p);
                 break;
             case 3:
-                st = ((step_fn)o->fn)(o->c, t, h, 1);
+                if (o->m > 1) {  /* multi-rate: over m macro steps (fewer at the end of the run) */
+                    long m = o->m < n_total - ks ? o->m : n_total - ks;
+                    st = ((step_fn)o->fn)(o->c, t, h * (double)m, 1);
+                } else {
+                    st = ((step_fn)o->fn)(o->c, t, h, 1);
+                }
                 break;
             case 4:
                 st = ((get_fn)o->fn)(o->c, o->vr, o->n, o->p);
@@ -144,8 +154,8 @@ def library():
             if path is not None:
                 fn = ctypes.PyDLL(str(path)).webline_run
                 fn.restype = c_int
-                fn.argtypes = [POINTER(Op), c_long, POINTER(c_double), POINTER(c_double), c_double, c_double,
-                               c_long, c_long, POINTER(c_long)]
+                fn.argtypes = [POINTER(POINTER(Op)), POINTER(c_long), c_long, POINTER(c_double),
+                               POINTER(c_double), c_double, c_double, c_long, c_long, c_long, POINTER(c_long)]
                 _LIB = fn
         except (OSError, subprocess.SubprocessError, AttributeError):
             _LIB = None
@@ -200,7 +210,8 @@ class Program:
 
     def step(self, s):
         dll = s.model.dll()
-        self.ops.append(Op(STEP, s.c, ctypes.cast(dll.fmi2DoStep, c_void_p), None, 0, None, None, None, 0))
+        self.ops.append(Op(STEP, s.c, ctypes.cast(dll.fmi2DoStep, c_void_p), None, 0, None, None, None,
+                           s.multiple))
         self.info.append((s, False))
 
     def get(self, s, a, b, at_end):
@@ -223,11 +234,17 @@ class Program:
         return self
 
 
-def gauss_seidel_program(plan, record):
-    """Operations of :func:`master.gauss_seidel_step` (and, with ``record``, of the reads
-    that step does on a recording step and of :func:`master.complete`)."""
+def gauss_seidel_program(plan, record, phase):
+    """Operations of :func:`master.gauss_seidel_step` for a step ``k`` with
+    ``k % period == phase`` (and, with ``record``, of the reads that step does on a
+    recording step and of :func:`master.complete`)."""
     p = Program(plan.y, plan.u)
     for chain, s in plan.gs_order:
+        if s.multiple > 1:
+            if phase % s.multiple == 0:
+                p.step(s)
+                p.get(s, 0, s.n_state + s.n_rest, True)
+            continue
         p.resolve(chain, False)
         if s.set_inputs is not None:
             p.gather(s)
@@ -242,17 +259,18 @@ def gauss_seidel_program(plan, record):
     return p.done()
 
 
-def jacobi_program(plan, record):
+def jacobi_program(plan, record, phase):
     """Operations of :func:`master.jacobi_step` (and :func:`master.complete` with ``record``)."""
     p = Program(plan.y, plan.u)
     p.gather_all(plan.dst, plan.src)
     for s in plan.slaves:
         if s.set_inputs is not None:
             p.set(s)
-    for s in plan.slaves:
+    now = [s for s in plan.slaves if s.multiple == 1 or phase % s.multiple == 0]
+    for s in now:
         p.step(s)
-    for s in plan.slaves:
-        p.get(s, 0, s.n_state + (s.n_rest if record else 0), True)
+    for s in now:
+        p.get(s, 0, s.n_state + (s.n_rest if record or s.multiple > 1 else 0), True)
     p.resolve(plan.groups, True)
     if record:
         _complete(p, plan, [])
@@ -272,22 +290,42 @@ class Runner:
     """Runs a plan's macro steps in compiled code: ``plain`` for steps that end between
     recording points, ``record`` for one that ends on one."""
 
-    def __init__(self, plan, gauss_seidel):
+    def __init__(self, plan, gauss_seidel, n_total):
         make = gauss_seidel_program if gauss_seidel else jacobi_program
         self.fn = library()
-        self.plain, self.record = make(plan, False), make(plan, True)
+        self.period = math.lcm(*(s.multiple for s in plan.slaves)) if plan.slaves else 1
+        self.n_total = n_total
+        multiples = sorted({s.multiple for s in plan.slaves if s.multiple > 1})
+        for record in (False, True):
+            made = {}  # phases that step the same instances share one program
+            progs = []
+            for ph in range(self.period):
+                key = tuple(ph % m == 0 for m in multiples)
+                if key not in made:
+                    made[key] = make(plan, record, ph)
+                progs.append(made[key])
+            setattr(self, "record" if record else "plain", self._programs(progs))
         self.y = ctypes.cast(plan.y.ctypes.data, POINTER(c_double))
         self.u = ctypes.cast(plan.u.ctypes.data, POINTER(c_double))
         self.where = (c_long * 2)()
 
-    def run(self, program, t0, h, k, n):
-        """Run ``n`` steps from step ``k``. Returns (0, n) or (status, steps done, slave,
-        FMI function, whether the call was at the step's end)."""
+    @staticmethod
+    def _programs(programs):
+        ptrs = (POINTER(Op) * len(programs))(*(ctypes.cast(p.array, POINTER(Op)) for p in programs))
+        lens = (c_long * len(programs))(*(len(p.ops) for p in programs))
+        return programs, ptrs, lens
+
+    def run(self, which, t0, h, k, n):
+        """Run ``n`` steps from step ``k`` (``which``: self.plain or self.record). Returns
+        (0, n, ...) or (status, steps done, slave, FMI function, whether the call was at the
+        step's end)."""
         if n <= 0:
             return 0, 0, None, None, False
-        st = self.fn(program.array, len(program.ops), self.y, self.u, t0, h, k, n, self.where)
+        programs, ptrs, lens = which
+        st = self.fn(ptrs, lens, self.period, self.y, self.u, t0, h, k, n, self.n_total, self.where)
         if st == 0:
             return 0, n, None, None, False
-        op = self.where[0]
-        slave, at_end = program.info[op]
-        return st, int(self.where[1]), slave, FUNCTION.get(program.ops[op].code, "?"), at_end
+        done = int(self.where[1])
+        program = programs[(k + done) % self.period]
+        slave, at_end = program.info[self.where[0]]
+        return st, done, slave, FUNCTION.get(program.ops[self.where[0]].code, "?"), at_end

@@ -175,6 +175,8 @@ class Slave:
         self.n_rest = 0  # then outputs that depend on no connected input and only get recorded
         self.inputs = []  # connected input names, in u order
         self.u0 = 0
+        # multi-rate: steps at every ``multiple``-th macro step over ``multiple`` macro steps
+        self.multiple = int(getattr(component, "step_multiple", 1) or 1)
 
     def label(self):
         extra = f", element {self.element!r}" if self.element != self.name else ""
@@ -307,6 +309,7 @@ class Plan:
         self.rate_groups, self.other_groups = [], list(groups)  # set by plan_coupling
         self.rest_read = False  # complete(): the record-only state outputs were read after the step
         self.record_next = True  # the step about to run ends on a recording point (set by simulate)
+        self.k, self.n_steps = 0, 1  # index of the step about to run, steps in the run (set by simulate)
         self.sink_set = [True] * len(sinks)  # set by plan_sinks: a sink's slave needs its inputs set
         self.columns, self.units, self.descriptions = columns, units, descriptions
 
@@ -345,6 +348,13 @@ def check_system(system, models):
             elif v.causality != want or v.type != "Real":
                 problems.append(f"connection {k.src}.{k.src_var} -> {k.dst}.{k.dst_var}: "
                                 f"{comp}.{var} is {_a(v.type)} {v.causality}, expected a Real {want}")
+    for c in system.components:
+        m = getattr(c, "step_multiple", 1)
+        if not (isinstance(m, int) and not isinstance(m, bool) and m >= 1):
+            problems.append(f"component {c.name!r}: step_multiple must be an integer >= 1 (got {m!r})")
+        elif m > 1 and any(k.dst == c.name for k in system.connections):
+            problems.append(f"component {c.name!r}: step_multiple {m} needs an instance without connected "
+                            "inputs (its inputs would be sampled at the slower rate)")
     e = system.experiment
     if e.algorithm not in ALGORITHMS:
         problems.append(f"experiment.algorithm {e.algorithm!r}: expected one of {', '.join(ALGORITHMS)}")
@@ -592,13 +602,21 @@ def jacobi_step(plan, t, h):
             st = s.set_inputs()
             if st:
                 _fail(s, "fmi2SetReal", st, t)
+    k = plan.k
     for s in plan.slaves:
-        st = s.do_step(ct, ch, one)
+        if s.multiple > 1:
+            if k % s.multiple:
+                continue
+            st = s.do_step(ct, c_double(h * min(s.multiple, plan.n_steps - k)), one)
+        else:
+            st = s.do_step(ct, ch, one)
         if st:
             _fail(s, "fmi2DoStep", st, t)
     t1 = t + h
     for s in plan.slaves:
-        get = s.get_all if plan.record_next else s.get_state
+        if s.multiple > 1 and k % s.multiple:
+            continue
+        get = s.get_all if plan.record_next or s.multiple > 1 else s.get_state
         if get is not None:
             st = get()
             if st:
@@ -615,7 +633,18 @@ def gauss_seidel_step(plan, t, h):
     y, u = plan.y, plan.u
     ct, ch, one = c_double(t), c_double(h), c_int(1)
     t1 = t + h
-    for chain, s, set_inputs, dst, src, back_v, back_r, do_step, get, get_all in plan.gs_loop:
+    k = plan.k
+    for chain, s, set_inputs, dst, src, back_v, back_r, do_step, get, get_all, m in plan.gs_loop:
+        if m > 1:  # multi-rate, no inputs: one step over m macro steps, then all outputs read
+            if k % m == 0:
+                st = do_step(ct, c_double(h * min(m, plan.n_steps - k)), one)
+                if st:
+                    _fail(s, "fmi2DoStep", st, t)
+                if get_all is not None:
+                    st = get_all()
+                    if st:
+                        _fail(s, "fmi2GetReal", st, t1)
+            continue
         if chain:
             resolve(chain, y, u, t)
         if set_inputs is not None:
@@ -757,7 +786,8 @@ def simulate(system, fmu_paths=None, progress=True, compiled=True):
             for g in (*plan.groups, *plan.sinks):
                 g.get = g.slave.get_range(g.a, g.b)
             plan.gs_loop = [(chain, s, s.set_inputs, s.dst, s.src, s.back_v, s.back_r, s.do_step,
-                             s.get_state, s.get_all) for chain, s in plan.gs_order]
+                             s.get_state, s.get_all, s.multiple) for chain, s in plan.gs_order]
+            plan.n_steps = n_steps
             # groups resolved between a step and complete(), in order
             plan_sinks(plan, plan.rate_groups + plan.other_groups if plan.gauss_seidel else plan.groups)
             setup_time = _time.perf_counter() - t_setup
@@ -781,12 +811,13 @@ def simulate(system, fmu_paths=None, progress=True, compiled=True):
             if compiled:
                 from webline.orchestrator import cloop
                 if cloop.available():
-                    runner = cloop.Runner(plan, plan.gauss_seidel)
+                    runner = cloop.Runner(plan, plan.gauss_seidel, n_steps)
             meta["master_loop"] = "compiled" if runner is not None else "python"
             while k < n_steps:
                 stop_k = min(n_steps, k + CHECK_EVERY)
                 while runner is None and k < stop_k:
                     plan.record_next = (k + 1) % every == 0
+                    plan.k = k
                     step(plan, t0 + k * h, h)
                     k += 1
                     if k % every == 0:
