@@ -166,21 +166,29 @@ def available():
     return library() is not None
 
 
+_INDEX_CACHE = {}  # id(index array) -> (array, its c_long copy, pointer); cleared per Runner
+
+
 class Program:
     """A macro step as operations; ``info[k]`` = (slave, at_end) of operation k (for failures)."""
 
     def __init__(self, y, u):
         self.y, self.u = y, u
+        # base addresses once: numpy's .ctypes builds an object per access
+        self.base = {id(y): y.__array_interface__["data"][0], id(u): u.__array_interface__["data"][0]}
         self.ops, self.info, self.keep = [], [], []
 
     def _ptr(self, arr, index, ctype):
-        return ctypes.cast(arr.ctypes.data + arr.itemsize * index, POINTER(ctype))
+        return ctypes.cast(self.base[id(arr)] + arr.itemsize * index, POINTER(ctype))
 
     def _indices(self, a):
-        import numpy as np
-        a = np.ascontiguousarray(a, dtype=np.int64 if ctypes.sizeof(c_long) == 8 else np.int32)
-        self.keep.append(a)
-        return ctypes.cast(a.ctypes.data, POINTER(c_long)), len(a)
+        hit = _INDEX_CACHE.get(id(a))
+        if hit is None or hit[0] is not a:  # the same index arrays recur in every program
+            import numpy as np
+            c = np.array(a, dtype=np.int64 if ctypes.sizeof(c_long) == 8 else np.int32)  # a copy we own
+            hit = _INDEX_CACHE[id(a)] = (a, c, ctypes.cast(c.__array_interface__["data"][0], POINTER(c_long)))
+        self.keep.append(hit)
+        return hit[2], len(hit[1])
 
     def gather(self, s):
         if len(s.dst):
@@ -292,6 +300,7 @@ class Runner:
 
     def __init__(self, plan, gauss_seidel, n_total):
         make = gauss_seidel_program if gauss_seidel else jacobi_program
+        _INDEX_CACHE.clear()
         self.fn = library()
         self.period = math.lcm(*(s.multiple for s in plan.slaves)) if plan.slaves else 1
         self.n_total = n_total
@@ -305,6 +314,7 @@ class Runner:
                     made[key] = make(plan, record, ph)
                 progs.append(made[key])
             setattr(self, "record" if record else "plain", self._programs(progs))
+        _INDEX_CACHE.clear()  # the programs keep what they use
         self.y = ctypes.cast(plan.y.ctypes.data, POINTER(c_double))
         self.u = ctypes.cast(plan.u.ctypes.data, POINTER(c_double))
         self.where = (c_long * 2)()
