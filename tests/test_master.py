@@ -200,3 +200,32 @@ def test_compiled_loop_reports_a_failure_like_the_python_loop(fmus):
     assert "fmi2DoStep" in a.message and "'a'" in a.message
     assert a.message == b.message
     assert np.array_equal(a.data, b.data)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_multi_rate_source_holds_its_outputs_between_its_steps(fmus, compiled):
+    # A ramp y = t stepped once per 4 macro steps of 10 ms: each of its steps covers 40 ms
+    # (the last one the 20 ms left), and its output, read after its step, holds the value at
+    # the end of that step until the next one; the span it feeds sees the same held value.
+    if compiled:
+        _compiled_loop_or_skip()
+    ramp = Component("ramp", "Profile", {"n": 2, "t[1]": 0.0, "y[1]": 0.0, "t[2]": 1.0, "y[2]": 1.0}, {},
+                     step_multiple=4)
+    span = Component("s", "Span", {"EA": EA, "L0": L0, "T0": 0.0, "length_mode": 1},
+                     {"v_in": 1.0, "v_out": 1.0, "T_in": 0.0, "L_ext": L0})
+    system = System([ramp, span], [Connection("ramp", "y", "s", "T_in")], Experiment(0.0, 0.1, 0.01, "gauss-seidel"))
+    r = simulate(system, fmus, progress=False, compiled=compiled)
+    assert r.status == "ok" and r.meta["master_loop"] == ("compiled" if compiled else "python")
+    held = [0.0, 0.04, 0.04, 0.04, 0.04, 0.08, 0.08, 0.08, 0.08, 0.10, 0.10]
+    assert np.allclose(r["ramp.y"], held, rtol=0, atol=1e-12)
+    assert np.allclose(r["ramp.dy"], 1.0)
+
+
+def test_multi_rate_needs_an_instance_without_inputs(fmus):
+    s = two_spans("gauss-seidel")
+    s.components[1].step_multiple = 3
+    with pytest.raises(SetupError, match=r"'b': step_multiple 3 needs an instance without connected inputs"):
+        simulate(s, fmus, progress=False)
+    s.components[1].step_multiple = 0
+    with pytest.raises(SetupError, match=r"'b': step_multiple must be an integer >= 1"):
+        simulate(s, fmus, progress=False)
