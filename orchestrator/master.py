@@ -776,7 +776,7 @@ def simulate(system, fmu_paths=None, progress=True, compiled=True):
     step = STEP[e.algorithm]
     plan.gauss_seidel = e.algorithm == "gauss-seidel"
     status, message, k = "ok", "", 0
-    t_loop, wall, setup_time = 0.0, 0.0, 0.0
+    t_loop, wall, setup_time, cpu = 0.0, 0.0, 0.0, float("nan")
     bar = None
     try:
         try:
@@ -791,7 +791,7 @@ def simulate(system, fmu_paths=None, progress=True, compiled=True):
             # groups resolved between a step and complete(), in order
             plan_sinks(plan, plan.rate_groups + plan.other_groups if plan.gauss_seidel else plan.groups)
             setup_time = _time.perf_counter() - t_setup
-            t_loop = _time.perf_counter()
+            t_loop, cpu_loop = _time.perf_counter(), _time.process_time()
             y = plan.y
             for s in slaves:
                 if s.get_state is not None:
@@ -846,6 +846,7 @@ def simulate(system, fmu_paths=None, progress=True, compiled=True):
                 if bar is not None:
                     bar.update(stop_k - bar.n)
             wall = _time.perf_counter() - t_loop
+            cpu = _time.process_time() - cpu_loop
         except RunFailure as f:
             status, message = "failed", str(f)
             if isinstance(f, FmiFailure) and any("KeyboardInterrupt" in m for _, m in f.slave.log):
@@ -866,6 +867,7 @@ def simulate(system, fmu_paths=None, progress=True, compiled=True):
     meta.update(status=status, message=message, wall_time=wall, setup_time=setup_time,
                 steps_done=k, simulated_time=simulated,
                 real_time_factor=(simulated / wall) if wall > 0 else float("nan"),
+                loop_cpu_time=cpu,
                 fmu_warnings=sum(s.warnings for s in slaves))
     return recorder.result(meta)
 

@@ -45,6 +45,7 @@ def run(layout, stop=10.0, step=None, algorithm=None, profile=False, sets=()):
     out = {"status": m["status"], "simulated": m["simulated_time"], "cpu": cpu, "wall": wall,
            "loop_wall": m["wall_time"], "setup_wall": m["setup_time"],
            "rtf_cpu": m["simulated_time"] / cpu if cpu > 0 else float("nan"),
+           "loop_cpu": m.get("loop_cpu_time", float("nan")), "master_loop": m.get("master_loop", "?"),
            "step": system.experiment.step, "algorithm": system.experiment.algorithm}
     return out, prof
 
@@ -63,7 +64,8 @@ def main(argv=None):
     out, prof = run(a.layout, a.stop, a.step, a.algorithm, a.profile, a.set)
     print(f"{a.layout}: {out['algorithm']} h={out['step'] * 1e3:g} ms, {out['simulated']:g} s simulated, "
           f"status {out['status']}: CPU {out['cpu']:.2f} s (setup wall {out['setup_wall']:.2f} s), "
-          f"wall {out['wall']:.2f} s -> real-time factor {out['rtf_cpu']:.2f}x (CPU)")
+          f"wall {out['wall']:.2f} s -> real-time factor {out['rtf_cpu']:.2f}x (CPU); stepping loop "
+          f"({out['master_loop']}) CPU {out['loop_cpu']:.2f} s -> {out['simulated'] / out['loop_cpu']:.2f}x")
     if prof:
         import pstats
         st = pstats.Stats(prof)
