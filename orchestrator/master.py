@@ -95,7 +95,10 @@ class FmuModel:
             raise SetupError(f"{self.path}: not an FMI 2.0 co-simulation FMU")
         self.name = self.md.modelName
         self.identifier = self.md.coSimulation.modelIdentifier
-        self.unzipdir = extract(str(self.path), unzipdir=tempfile.mkdtemp(prefix=f"webline_{self.identifier}_"))
+        # everything but other platforms' binaries (the largest members: a third of the setup's writes)
+        mine = f"binaries/{_platform()}/"
+        self.unzipdir = extract(str(self.path), unzipdir=tempfile.mkdtemp(prefix=f"webline_{self.identifier}_"),
+                                include=lambda n: not n.startswith("binaries/") or n.startswith(mine))
         _EXTRACTED.append(self.unzipdir)
         self.library = os.path.join(self.unzipdir, "binaries", _platform(),
                                     self.identifier + (".dll" if sys.platform == "win32" else ".so"))

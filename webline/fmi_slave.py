@@ -258,6 +258,13 @@ def span_declarations(damped):
     return parameters, inputs, outputs
 
 
+def _as_slice(idx):
+    """``slice(a, b)`` when ``idx`` is ``a, a + 1, ..., b - 1`` (else None)."""
+    if idx and idx == list(range(idx[0], idx[0] + len(idx))):
+        return slice(idx[0], idx[0] + len(idx))
+    return None
+
+
 class ElementSlave(Fmi2Slave):
     """A primitive element model (see ``webline.physics.element``) as an FMI 2.0 slave.
 
@@ -466,12 +473,16 @@ class ElementSlave(Fmi2Slave):
             if hit is not None:
                 if hit[0] and self.dirty:
                     self._refresh_if_dirty()
+                if hit[2] is not None:  # consecutive outputs: one slice (pythonfmu wants a list)
+                    y = self._y[hit[2]]
+                    return y if type(y) is list else list(y)
                 y = self._y
                 return [y[i] for i in hit[1]]
             table = self._vr or self._vr_tables()
             rows = [table[vr] for vr in key]
             if all(r[2] == 2 for r in rows):
-                fast[key] = (any(r[1] for r in rows), [r[3] for r in rows])
+                idx = [r[3] for r in rows]
+                fast[key] = (any(r[1] for r in rows), idx, _as_slice(idx))
         table = self.__dict__.get("_vr") or self._vr_tables()
         out = []
         for vr in vrs:
@@ -490,18 +501,24 @@ class ElementSlave(Fmi2Slave):
         fast = self.__dict__.get("_set_fast")  # inputs only, after initialisation: their indices
         if fast is not None:
             key = tuple(vrs)
-            idx = fast.get(key)
-            if idx is not None:
-                u, t_set, now = self._u, self._t_set, self.time
-                for i, value in zip(idx, values):
-                    u[i] = value
-                    t_set[i] = now
+            hit = fast.get(key)
+            if hit is not None:
+                idx, sl = hit
+                if sl is not None:  # consecutive inputs: slice assignments
+                    self._u[sl] = values
+                    self._t_set[sl] = [self.time] * len(values)
+                else:
+                    u, t_set, now = self._u, self._t_set, self.time
+                    for i, value in zip(idx, values):
+                        u[i] = value
+                        t_set[i] = now
                 self.dirty = True
                 return
             table = self._vr or self._vr_tables()
             rows = [table[vr] for vr in key]
             if all(r[2] == 1 for r in rows):
-                fast[key] = [r[3] for r in rows]
+                idx = [r[3] for r in rows]
+                fast[key] = (idx, _as_slice(idx))
         table = self.__dict__.get("_vr") or self._vr_tables()
         now = self.time
         u, t_set = self.__dict__.get("_u"), self.__dict__.get("_t_set")
