@@ -230,28 +230,3 @@ def test_multi_rate_needs_an_instance_without_inputs(fmus):
     with pytest.raises(SetupError, match=r"'b': step_multiple must be an integer >= 1"):
         simulate(s, fmus, progress=False)
 
-
-def test_sinks_read_without_a_set_see_the_inputs_they_would_be_set(fmus, monkeypatch):
-    # complete() skips setting a sink's slave inputs when the end-of-step resolve set them
-    # and nothing resolved after it feeds them; setting them anyway must change nothing.
-    from pathlib import Path
-
-    from webline.orchestrator import master
-    from webline.orchestrator.layout import load_system
-    layout = Path(__file__).resolve().parent.parent / "scenarios" / "ewl_out_of_round.yaml"
-    system = load_system(layout, {"experiment.duration": 0.04})
-    skipped = []
-    real = master.plan_sinks
-
-    def spy(plan, before):
-        real(plan, before)
-        skipped.append(plan.sink_set.count(False))
-    monkeypatch.setattr(master, "plan_sinks", spy)
-    a = simulate(system, fmus, progress=False, compiled=False)
-    assert skipped and skipped[0] > 0  # the EWL has such sinks (the speed loops' omega_ref)
-
-    def always(plan, before):
-        plan.sink_set = [True] * len(plan.sinks)
-    monkeypatch.setattr(master, "plan_sinks", always)
-    b = simulate(system, fmus, progress=False, compiled=False)
-    assert np.array_equal(a.data, b.data)
