@@ -117,12 +117,15 @@ def n_fmus(system):
 def bench_rtf(fmu_paths, duration):
     from webline.orchestrator.layout import load_system
     system = load_system(SCEN / "ewl.yaml", {"experiment.duration": f"{duration} s"} if duration else None)
+    c0 = time.process_time()
     r, loop, setup, total = run(system, fmu_paths)
+    cpu = time.process_time() - c0
     sim = float(r.time[-1] - r.time[0])
     return {"scenario": "scenarios/ewl.yaml", "duration_s": sim, "step_s": system.experiment.step,
             "algorithm": system.experiment.algorithm, "n_fmus": n_fmus(system),
-            "loop_wall_s": loop, "setup_wall_s": setup, "total_wall_s": total,
-            "rtf": sim / loop, "rtf_incl_setup": sim / total,
+            "master_loop": r.meta.get("master_loop"),
+            "loop_wall_s": loop, "setup_wall_s": setup, "total_wall_s": total, "cpu_s": cpu,
+            "rtf": sim / loop, "rtf_incl_setup": sim / total, "rtf_cpu_incl_setup": sim / cpu,
             "us_per_macro_step": 1e6 * loop / round(sim / system.experiment.step),
             "us_per_fmu_step": 1e6 * loop / round(sim / system.experiment.step) / n_fmus(system)}
 
@@ -181,14 +184,16 @@ def bench_fmu_share(fmu_paths, duration):
     with DoStepTimer() as timer:
         r, loop, _, _ = run(system, fmu_paths)
     steps = round(float(r.time[-1] - r.time[0]) / system.experiment.step)
-    expected = steps * n_fmus(system)
+    # multi-rate instances (Component.step_multiple) step once per multiple macro steps
+    expected = sum(-(-steps // max(1, getattr(c, "step_multiple", 1))) for c in system.components)
     if timer.n["do_step"] < 0.99 * expected:
         return {"error": f"do_step wrapper saw {timer.n['do_step']} calls, expected {expected}: "
                          "the FMUs do not use this process's webline.fmi_slave"}
     t, n = timer.t, timer.n
     python_fmu = t["do_step"] + t["get_real"] + t["set_real"]
     return {"scenario": "scenarios/ewl.yaml", "duration_s": steps * system.experiment.step,
-            "n_fmus": n_fmus(system), "loop_wall_s": loop,
+            "n_fmus": n_fmus(system), "loop_wall_s": loop, "master_loop": r.meta.get("master_loop"),
+            "fmi_calls_per_macro_step": {k: n[k] / steps for k in ("do_step", "get_real", "set_real")},
             "do_step_s": t["do_step"], "do_step_calls": n["do_step"],
             "us_per_do_step": 1e6 * t["do_step"] / max(1, n["do_step"]),
             "get_real_s": t["get_real"], "get_real_calls": n["get_real"],
@@ -532,15 +537,21 @@ def table(res):
     if r:
         add(f"real-time factor, ewl.yaml ({r['n_fmus']} FMUs, step {r['step_s'] * 1e3:g} ms, {r['algorithm']}, "
             f"{r['duration_s']:g} s): {r['rtf']:.3f}  ({r['us_per_macro_step']:.0f} us/macro step, "
-            f"{r['us_per_fmu_step']:.1f} us per FMU step; setup {r['setup_wall_s']:.2f} s)")
+            f"{r['us_per_fmu_step']:.1f} us per FMU step; setup {r['setup_wall_s']:.2f} s; "
+            f"{r.get('master_loop', '?')} master loop; by CPU time incl. setup "
+            f"{r.get('rtf_cpu_incl_setup', float('nan')):.2f})")
     s = _section(res, "fmu_share", "share outside do_step", add)
     if s:
         add(f"outside the FMUs' do_step: {100 * s['share_outside_do_step']:.1f} % of the master loop "
             f"({s['us_per_do_step']:.1f} us per do_step)")
         add(f"   loop split: do_step {100 * s['share_in_do_step']:.1f} %, FMI get/set in the slaves' Python "
             f"{100 * s['share_in_get_set_python']:.1f} % (feed-through refresh "
-            f"{100 * s['share_of_which_feedthrough_refresh']:.1f} %), master + ctypes + pythonfmu C + recording "
-            f"{100 * s['share_outside_fmu_python']:.1f} %")
+            f"{100 * s['share_of_which_feedthrough_refresh']:.1f} %), master ({s.get('master_loop', '?')} loop) "
+            f"+ pythonfmu C + recording {100 * s['share_outside_fmu_python']:.1f} %")
+        c = s.get("fmi_calls_per_macro_step")
+        if c:
+            add(f"   FMI calls per macro step: {c['do_step']:.1f} doStep, {c['set_real']:.1f} setReal, "
+                f"{c['get_real']:.1f} getReal")
     st = _section(res, "step_sweep", "step sweep", add)
     if st:
         add("")

@@ -184,6 +184,10 @@ def _union_member(tp, tag):
     return tp
 
 
+# macro steps per communication step of a constant Profile (docs/performance.md)
+CONSTANT_PROFILE_STEPS = 25
+
+
 # ---- cross-field checks -----------------------------------------------------------------------
 class _Checker:
     """Relations between fields and sections, each problem with the location of its field."""
@@ -661,7 +665,9 @@ class _Builder:
         for k, (t, y) in enumerate(zip(ts, ys), start=1):
             params[f"t[{k}]"] = float(t)
             params[f"y[{k}]"] = float(y)
-        self.add(Component(name, "Profile", params, {}, element, kind), loc)
+        # a constant profile cannot change between macro steps: step it at a slower rate
+        self.add(Component(name, "Profile", params, {}, element, kind,
+                           step_multiple=CONSTANT_PROFILE_STEPS if len(set(ys)) == 1 else 1), loc)
         self.profiles[name] = (list(ts), list(ys))
 
     def _load_cells(self):

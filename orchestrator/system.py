@@ -19,6 +19,9 @@ class Component:
     inputs: dict = field(default_factory=dict)
     element: str = ""
     kind: str = ""  # layout element type, e.g. "idle_roller", "span", "speed_pi"
+    # communication steps of this instance span this many macro steps (multi-rate; outputs
+    # held in between): only for instances without connected inputs, e.g. a constant source
+    step_multiple: int = 1
 
 
 @dataclass(frozen=True)

@@ -156,3 +156,77 @@ def test_progress_bar_is_off_without_a_tty(fmus, capsys):
     r = simulate(two_spans("jacobi", stop=0.1), fmus, progress=True)
     assert r.ok
     assert capsys.readouterr().err == ""
+
+
+def _compiled_loop_or_skip():
+    from webline.orchestrator import cloop
+    if not cloop.available():
+        pytest.skip("no C compiler: the master keeps its Python loop")
+
+
+@pytest.mark.parametrize("algorithm, step, interval", [("gauss-seidel", 2e-3, 0.0), ("gauss-seidel", 2e-3, 6e-3),
+                                                        ("jacobi", 1e-3, 0.0), ("jacobi", 1e-3, 3e-3)])
+def test_compiled_loop_makes_the_python_loop_calls(fmus, algorithm, step, interval):
+    # The EWL has every kind of operation: feed-through chains before a step, anchored
+    # extrapolated inputs, rate groups resolved after the round, sinks read on recording
+    # steps. Same calls in the same order on the same arrays: bit-identical records.
+    from pathlib import Path
+
+    from webline.orchestrator.layout import load_system
+    _compiled_loop_or_skip()
+    layout = Path(__file__).resolve().parent.parent / "scenarios" / "ewl_out_of_round.yaml"
+    system = load_system(layout, {"experiment.duration": 0.06, "experiment.step": step,
+                                  "experiment.algorithm": algorithm, "experiment.output_interval": interval})
+    a = simulate(system, fmus, progress=False, compiled=True)
+    b = simulate(system, fmus, progress=False, compiled=False)
+    assert a.meta["master_loop"] == "compiled" and b.meta["master_loop"] == "python"
+    assert a.status == b.status == "ok"
+    assert len(a.time) == round(0.06 / max(step, interval)) + 1
+    assert np.array_equal(a.time, b.time)
+    assert np.array_equal(a.data, b.data)
+
+
+def test_compiled_loop_reports_a_failure_like_the_python_loop(fmus):
+    _compiled_loop_or_skip()
+    runs = []
+    for compiled in (True, False):
+        s = two_spans("gauss-seidel", stop=1.0, max_step=1e-2)
+        s.component("a").inputs["L_ext"] = 1e-3
+        s.component("a").inputs["v_out"] = 300.0
+        s.experiment.step = 1e-2
+        runs.append(simulate(s, fmus, progress=False, compiled=compiled))
+    a, b = runs
+    assert a.status == b.status == "failed"
+    assert "fmi2DoStep" in a.message and "'a'" in a.message
+    assert a.message == b.message
+    assert np.array_equal(a.data, b.data)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_multi_rate_source_holds_its_outputs_between_its_steps(fmus, compiled):
+    # A ramp y = t stepped once per 4 macro steps of 10 ms: each of its steps covers 40 ms
+    # (the last one the 20 ms left), and its output, read after its step, holds the value at
+    # the end of that step until the next one; the span it feeds sees the same held value.
+    if compiled:
+        _compiled_loop_or_skip()
+    ramp = Component("ramp", "Profile", {"n": 2, "t[1]": 0.0, "y[1]": 0.0, "t[2]": 1.0, "y[2]": 1.0}, {},
+                     step_multiple=4)
+    span = Component("s", "Span", {"EA": EA, "L0": L0, "T0": 0.0, "length_mode": 1},
+                     {"v_in": 1.0, "v_out": 1.0, "T_in": 0.0, "L_ext": L0})
+    system = System([ramp, span], [Connection("ramp", "y", "s", "T_in")], Experiment(0.0, 0.1, 0.01, "gauss-seidel"))
+    r = simulate(system, fmus, progress=False, compiled=compiled)
+    assert r.status == "ok" and r.meta["master_loop"] == ("compiled" if compiled else "python")
+    held = [0.0, 0.04, 0.04, 0.04, 0.04, 0.08, 0.08, 0.08, 0.08, 0.10, 0.10]
+    assert np.allclose(r["ramp.y"], held, rtol=0, atol=1e-12)
+    assert np.allclose(r["ramp.dy"], 1.0)
+
+
+def test_multi_rate_needs_an_instance_without_inputs(fmus):
+    s = two_spans("gauss-seidel")
+    s.components[1].step_multiple = 3
+    with pytest.raises(SetupError, match=r"'b': step_multiple 3 needs an instance without connected inputs"):
+        simulate(s, fmus, progress=False)
+    s.components[1].step_multiple = 0
+    with pytest.raises(SetupError, match=r"'b': step_multiple must be an integer >= 1"):
+        simulate(s, fmus, progress=False)
+

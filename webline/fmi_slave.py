@@ -258,6 +258,13 @@ def span_declarations(damped):
     return parameters, inputs, outputs
 
 
+def _as_slice(idx):
+    """``slice(a, b)`` when ``idx`` is ``a, a + 1, ..., b - 1`` (else None)."""
+    if idx and idx == list(range(idx[0], idx[0] + len(idx))):
+        return slice(idx[0], idx[0] + len(idx))
+    return None
+
+
 class ElementSlave(Fmi2Slave):
     """A primitive element model (see ``webline.physics.element``) as an FMI 2.0 slave.
 
@@ -376,6 +383,7 @@ class ElementSlave(Fmi2Slave):
         self._slot = {a: (True, i) for i, a in enumerate(self._input_attrs)}
         self._slot.update({a: (False, i) for i, a in enumerate(self._output_attrs)})
         self._vr = None
+        self._get_fast, self._set_fast = {}, {}  # value-reference tuple -> indices (get_real, set_real)
         self._step = {1: rk4_1, 2: rk4_2, 3: rk4_3}.get(len(self.model.STATES), rk4_step)
         self.x = list(self.model.initial_state())
         try:
@@ -456,6 +464,25 @@ class ElementSlave(Fmi2Slave):
         return tables
 
     def get_real(self, vrs):
+        # A master asks for the same value-reference lists every step: after initialisation
+        # a list of outputs only is answered from a cache (indices into self._y).
+        fast = self.__dict__.get("_get_fast")
+        if fast is not None:
+            key = tuple(vrs)
+            hit = fast.get(key)
+            if hit is not None:
+                if hit[0] and self.dirty:
+                    self._refresh_if_dirty()
+                if hit[2] is not None:  # consecutive outputs: one slice (pythonfmu wants a list)
+                    y = self._y[hit[2]]
+                    return y if type(y) is list else list(y)
+                y = self._y
+                return [y[i] for i in hit[1]]
+            table = self._vr or self._vr_tables()
+            rows = [table[vr] for vr in key]
+            if all(r[2] == 2 for r in rows):
+                idx = [r[3] for r in rows]
+                fast[key] = (any(r[1] for r in rows), idx, _as_slice(idx))
         table = self.__dict__.get("_vr") or self._vr_tables()
         out = []
         for vr in vrs:
@@ -471,6 +498,27 @@ class ElementSlave(Fmi2Slave):
         return out
 
     def set_real(self, vrs, values):
+        fast = self.__dict__.get("_set_fast")  # inputs only, after initialisation: their indices
+        if fast is not None:
+            key = tuple(vrs)
+            hit = fast.get(key)
+            if hit is not None:
+                idx, sl = hit
+                if sl is not None:  # consecutive inputs: slice assignments
+                    self._u[sl] = values
+                    self._t_set[sl] = [self.time] * len(values)
+                else:
+                    u, t_set, now = self._u, self._t_set, self.time
+                    for i, value in zip(idx, values):
+                        u[i] = value
+                        t_set[i] = now
+                self.dirty = True
+                return
+            table = self._vr or self._vr_tables()
+            rows = [table[vr] for vr in key]
+            if all(r[2] == 1 for r in rows):
+                idx = [r[3] for r in rows]
+                fast[key] = (idx, _as_slice(idx))
         table = self.__dict__.get("_vr") or self._vr_tables()
         now = self.time
         u, t_set = self.__dict__.get("_u"), self.__dict__.get("_t_set")
