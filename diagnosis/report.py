@@ -31,21 +31,32 @@ def build(d):
         "timings_s": d.timings,
         "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall},
     }
+    from webline.diagnosis import claims
     fit = [c for c in d.ctx if c.fit]
     hold = [c for c in d.ctx if not c.fit]
     first, last = d.steps[0], d.steps[-1]
     sensors = list(dict.fromkeys(s for c in d.ctx for s in c.sensors))
-    rep["gap"] = {s: {"nominal": _agg(first, fit, s), "refined": _agg(last, fit, s),
-                      "by_run": {c.name: {"nominal": first["metrics"][c.name][s],
-                                          "refined": last["metrics"][c.name][s]}
-                                 for c in d.ctx if s in c.sensors}}
+    if not hasattr(d, "noise"):
+        d.noise = claims.sensor_noise(d)
+
+    def gap_entry(ctxs, s):
+        nom, ref = _agg(first, ctxs, s), _agg(last, ctxs, s)
+        if nom is None:
+            return {"nominal": None, "refined": None, "achievable": None, "closed_share": None}
+        ach = claims.achievable_for(d, d.noise, ctxs, s)
+        return {"nominal": nom, "refined": ref, "achievable": ach,
+                "closed_share": claims.closed_share(nom["nrmse"], ref["nrmse"], ach)}
+
+    rep["gap"] = {s: dict(gap_entry(fit, s),
+                          by_run={c.name: dict(gap_entry([c], s), **{
+                              "nominal": first["metrics"][c.name][s], "refined": last["metrics"][c.name][s]})
+                                  for c in d.ctx if s in c.sensors})
                   for s in sensors}
     rep["holdout"] = {
         "fit_runs": [c.name for c in fit],
         "holdout_runs": [c.name for c in hold],
-        "in_sample": {s: {"nominal": _agg(first, fit, s), "refined": _agg(last, fit, s)} for s in sensors},
-        "out_of_sample": ({s: {"nominal": _agg(first, hold, s), "refined": _agg(last, hold, s)}
-                           for s in sensors} if hold else None),
+        "in_sample": {s: gap_entry(fit, s) for s in sensors},
+        "out_of_sample": ({s: gap_entry(hold, s) for s in sensors} if hold else None),
     }
     prev = None
     for st in d.steps:
@@ -59,6 +70,11 @@ def build(d):
         prev = row
     rep["remaining_peaks"] = _remaining(d)
     rep["across_runs"] = _across_runs(d, rep)
+    rep["noise_floor"] = {r: {s: {k: v for k, v in x.items()} for s, x in per.items()} for r, per in d.noise.items()}
+    rep["left"] = claims.leftovers(d, d.noise, rep["remaining_peaks"])
+    rep["findings"] = claims.humps(d, d.noise)
+    rep["rejected"] = _rejected(d)
+    rep["structure"] = getattr(d, "structure", None)
     rep["verdict"] = _verdict(rep)
     if d.out:
         out = Path(d.out)
@@ -131,7 +147,13 @@ def _effects(d):
             "pattern_misfit": b["misfit"],
             "angle_source": {c.name: c.theta_src[k.key] for c in d.ctx},
             "tension_harmonics": _tension_harmonics(d, b),
+            "check": fe.get("check"),
+            "model_form": fe.get("structure", "as modelled"),
+            "amplitude_uncertainty": ((getattr(d, "structure", None) or {}).get("amplitude_uncertainty") or {})
+            .get(k.element),
         }
+        if d.kappa_allowed(k) and d.kappa_of(k):
+            eff["radius_m"] = {"nominal": k.radius, "estimated": k.radius / (1.0 + d.kappa_of(k))}
         out.append(eff)
     for o in getattr(d, "other", []) or []:
         out.append({k: v for k, v in o.items() if not callable(v) and not k.startswith("_") and k != "line"})
@@ -278,10 +300,66 @@ def _across_runs(d, rep):
     return out
 
 
+def _rejected(d):
+    """Everything screened and dropped, with the numbers that dropped it: effects
+    the refine check took out, structural alternatives not chosen, the greedy
+    periodic screen's best families that missed a threshold, the non-periodic
+    candidates that explained too little."""
+    out = [{k: v for k, v in r.items() if not k.startswith("_")} for r in getattr(d, "rejected", [])]
+    opt = d.opt
+    for i, step in enumerate(getattr(d, "screen_log", []) or []):
+        chosen = {e["element"] for fe in getattr(d, "effects", []) for e in
+                  [{"element": g["cand"].element} for g in fe["group"]]}
+        for e in step[:5]:
+            if e["element"] in chosen:
+                continue
+            why = []
+            if not e["log10_p"] < opt.significance:
+                why.append(f"log10 p {e['log10_p']:.3g} >= {opt.significance:g}")
+            if e["share"] < opt.min_share:
+                why.append(f"share {100 * e['share']:.2g} % < {100 * opt.min_share:g} %")
+            if e["coherence"] < opt.min_coherence:
+                why.append(f"coherence {e['coherence']:.2f} < {opt.min_coherence:g}")
+            if not why:
+                why.append("weaker than the family chosen at this step")
+            out.append({"element": e["element"], "kind": e["kind"], "stage": f"periodic screen step {i + 1}",
+                        "reason": "; ".join(why), "explained_share": e["share"], "log10_p": e["log10_p"],
+                        "coherence": e["coherence"]})
+    from webline.diagnosis.others import MIN_SHARE
+    kept = {(o["element"], o["kind"]) for o in getattr(d, "other", []) or []}
+    for entry in getattr(d, "other_log", []) or []:
+        for r in entry.get("screened", []):
+            if (r["element"], r["kind"]) in kept:
+                continue
+            out.append({"element": r["element"], "kind": r["kind"], "stage": "other-effects screen",
+                        "reason": (f"explains {100 * r['share']:.1f} % of the residual left (needs "
+                                   f"{100 * MIN_SHARE:.0f} %)" if r["share"] < MIN_SHARE
+                                   else "explains less than the candidate chosen"),
+                        "explained_share": r["share"], "detail": r.get("detail")})
+    return out
+
+
 def _verdict(rep):
     effs = rep["effects"]
+    finds = [f["text"] for f in rep.get("findings") or []]
+    rej = [r for r in rep.get("rejected") or [] if r.get("stage") in ("refine check", "structure check")]
+    extra = ""
+    if finds:
+        extra += " Findings: " + "; ".join(finds[:3]) + "."
+    if rej:
+        extra += f" {len(rej)} effect(s) rejected by the check (see 'rejected')."
+    st = rep.get("structure") or {}
+    if st.get("chosen") and st["chosen"] != "as modelled":
+        extra += f" Model form: {st['chosen']}."
     if not effs:
-        return "no unmodelled effect found: the residual is noise at the level the data can resolve"
+        above = [(s, v) for s, v in rep["gap"].items() if v.get("nominal") and v.get("achievable")
+                 and v["nominal"]["nrmse"] > 1.5 * v["achievable"]]
+        if finds or above:
+            g = "; ".join(f"{s}: NRMSE {v['nominal']['nrmse']:.3g}, noise allows {v['achievable']:.3g}"
+                          for s, v in above)
+            return ("no unmodelled effect passed the check; the residual is above the noise floor"
+                    + (f" ({g})" if g else "") + "." + extra)
+        return "no unmodelled effect found: the residual is noise at the level the data can resolve." + extra
     parts = []
     for e in effs:
         c = ", ".join(x["element"] for x in e["candidates"]) if len(e.get("candidates", [])) > 1 else e["element"]
@@ -292,8 +370,9 @@ def _verdict(rep):
     g = []
     for s, v in rep["gap"].items():
         if v["nominal"] and v["refined"]:
-            g.append(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}")
-    return "; ".join(parts) + ". " + "; ".join(g)
+            g.append(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}"
+                     + (f" (noise allows {v['achievable']:.3g})" if v.get("achievable") is not None else ""))
+    return "; ".join(parts) + ". " + "; ".join(g) + "." + extra
 
 
 def _clean(o):
