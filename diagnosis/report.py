@@ -446,10 +446,35 @@ def html_report(d, rep):
                          f"<td>{_fmt(100 * ef['explained_share'], 3)} %</td><td>{_fmt(ef['confidence'], 2)}</td>"
                          f"<td class=l>{e(C)}</td></tr>")
         parts.append("</table>")
+    if rep.get("findings"):
+        parts.append("<h2>Findings</h2><ul>" + "".join(f"<li>{e(f['text'])}</li>" for f in rep["findings"]) + "</ul>")
+    st = rep.get("structure")
+    if st and st.get("triggers"):
+        parts.append("<h2>Model form</h2><p>Screened because: " + e("; ".join(st["triggers"])) + "</p>"
+                     f"<p>Chosen: <b>{e(str(st.get('chosen')))}</b></p><table><tr><th>form</th>"
+                     "<th>sum NRMSE<sup>2</sup></th><th>NRMSE per sensor</th><th>note</th></tr>")
+        rows = [("as modelled", st.get("as_modelled", {}))] + [(r["name"], r) for r in st.get("screened", [])]
+        for name, r in rows:
+            nr = ", ".join(f"{k}: {_fmt(v)}" for k, v in (r.get("nrmse") or {}).items())
+            parts.append(f"<tr><td class=l>{e(name)}</td><td>{_fmt(r.get('score'))}</td><td class=l>{e(nr)}</td>"
+                         f"<td class=l>{e(str(r.get('not_screened') or (r.get('check') or {}).get('reason') or ''))}</td></tr>")
+        parts.append("</table>")
+        for el, u in (st.get("amplitude_uncertainty") or {}).items():
+            parts.append(f"<p>{e(el)}: order {u['dominant_order']} amplitude {1e6 * u['amplitude']:.1f} &micro;m "
+                         f"(forms that fit about as well: {1e6 * u['range'][0]:.1f}-{1e6 * u['range'][1]:.1f} &micro;m)"
+                         + (f"; {e(u['note'])}" if u.get("note") else "") + "</p>")
+    if rep.get("rejected"):
+        parts.append("<h2>Rejected</h2><table><tr><th>element</th><th>kind</th><th>stage</th><th>reason</th></tr>")
+        for r in rep["rejected"][:40]:
+            parts.append(f"<tr><td class=l>{e(str(r['element']))}</td><td class=l>{e(str(r['kind']))}</td>"
+                         f"<td class=l>{e(str(r['stage']))}</td><td class=l>{e(str(r.get('reason', '')))}</td></tr>")
+        parts.append("</table>")
     # gap table
-    parts.append("<h2>Gap before / after</h2><table><tr><th>sensor</th><th>runs</th><th>model</th>"
+    parts.append("<h2>Gap before / after</h2><p>achievable: the NRMSE the noise floor estimated from the data "
+                 "allows; closed: (nominal - refined) / (nominal - achievable).</p>"
+                 "<table><tr><th>sensor</th><th>runs</th><th>model</th>"
                  "<th>NRMSE</th><th>fit %</th><th>L1 (N s)</th><th>L2 (N<sup>2</sup> s)</th>"
-                 "<th>L&infin; (N)</th><th>spectral peak err</th></tr>")
+                 "<th>L&infin; (N)</th><th>spectral peak err</th><th>achievable</th><th>closed</th></tr>")
     for label, key in (("fit", "in_sample"), ("held out", "out_of_sample")):
         block = rep["holdout"].get(key)
         if not block:
@@ -462,7 +487,9 @@ def html_report(d, rep):
                 parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{label}</td><td class=l>{m}</td>"
                              f"<td>{_fmt(g['nrmse'])}</td><td>{_fmt(g['fit_percent'])}</td><td>{_fmt(g['l1'])}</td>"
                              f"<td>{_fmt(g['l2'])}</td><td>{_fmt(g['linf'])}</td>"
-                             f"<td>{_fmt(g.get('spectral_peak_error'))}</td></tr>")
+                             f"<td>{_fmt(g.get('spectral_peak_error'))}</td>"
+                             + (f"<td>{_fmt(v.get('achievable'))}</td><td>{_fmt(v.get('closed_share'))}</td>"
+                                if m == "refined" else "<td></td><td></td>") + "</tr>")
     parts.append("</table>")
     if len(rep["steps"]) > 2:
         parts.append("<h3>Per effect added (fit runs, cumulative)</h3><table><tr><th>step</th><th>sensor</th>"
@@ -472,6 +499,20 @@ def html_report(d, rep):
                 if g:
                     parts.append(f"<tr><td class=l>{e(str(st['added'] or 'nominal'))}</td><td class=l>{e(s)}</td>"
                                  f"<td>{_fmt(g['nrmse'])}</td><td>{_fmt(g['fit_percent'])}</td></tr>")
+        parts.append("</table>")
+    # what is left
+    if rep.get("left"):
+        parts.append("<h2>Left after refinement</h2><table><tr><th>sensor</th><th>effect</th><th>orders</th>"
+                     "<th>share left</th><th>significant</th></tr>")
+        for s, v in rep["left"].items():
+            for ef in v["effects"]:
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{e(ef['kind'])} of {e(ef['element'])}</td>"
+                             f"<td class=l>{e(', '.join(map(str, ef['orders'])))}</td><td>{_fmt(ef['share_left'])}</td>"
+                             f"<td class=l>{'yes' if ef['significant'] else 'no'}</td></tr>")
+            if v["untagged_peaks_left"]:
+                pk = ", ".join(f"{p['frequency_hz']:.3g} Hz" for p in v["untagged_peaks_left"][:6])
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>untagged peaks</td><td class=l colspan=3>"
+                             f"{e(pk)}</td></tr>")
         parts.append("</table>")
     # where
     parts.append("<h2>Where model and data differ</h2>")

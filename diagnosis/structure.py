@@ -237,50 +237,83 @@ def screen(d):
         return e
 
     e_cur = left_energy(cur_sims)
+    sensors = list(dict.fromkeys(s_ for c in fit for s_ in c.sensors))
+    d2 = {s_: sum(float(np.sum((c.meas[s_] - np.mean(c.meas[s_])) ** 2)) for c in fit if s_ in c.sensors)
+          for s_ in sensors}
+    # stage A, every alternative: its nominal and a probe with the current estimates
+    # (2 simulations per fit run) give its gains, a re-estimate X1 and a predicted
+    # score (the alternative's nominal residual minus the harmonic energy X1 explains)
+    stage_a = []
     for name, desc, sets in alternatives(d)[:max(0, d.opt.max_structures)]:
         entry = {"name": name, "description": desc, "set": sets}
+        d.structure["screened"].append(entry)
         try:
             alt0 = _apply(zero, sets)
             d.model.system(fit[0].run, alt0)  # the layout accepts the form?
         except Exception as exc:  # noqa: BLE001 - any rejection of the key: not screened, say why
             entry["not_screened"] = f"the layout does not accept it: {str(exc).splitlines()[0][:200]}"
-            d.structure["screened"].append(entry)
             continue
         try:
             nom_alt = sim_fit(alt0, f"structure {name} nominal")
             X0s = {cand.element: X0 for cand, X0, _ in effs}
             probe = sim_fit(with_all(alt0, X0s), f"structure {name} probe")
-            X1s, Gs = {}, {}
-            for cand, X0, _ in effs:
-                Hp, W = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, probe[c.name].columns[s]
-                                                                 - nom_alt[c.name].columns[s]))
-                M, _ = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, c.meas[s] - nom_alt[c.name].columns[s]))
-                keep = np.abs(X0) > 0
-                G = np.where(keep[None, :], Hp / np.where(keep, X0, 1.0)[None, :], 0.0)
-                X1, _ = est.solve_fourier(M, G, W)
-                X1s[cand.element] = np.where(keep, X1, 0.0)
-                Gs[cand.element] = (G, W, keep)
+        except SimulationFailed as exc:
+            entry["not_screened"] = f"simulation failed: {exc}"
+            continue
+        X1s, Gs = {}, {}
+        e2 = {s_: sum(float(np.sum((c.meas[s_] - nom_alt[c.name].columns[s_]) ** 2)) for c in fit
+                      if s_ in c.sensors) for s_ in sensors}
+        for cand, X0, _ in effs:
+            Hp, W = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, probe[c.name].columns[s_]
+                                                             - nom_alt[c.name].columns[s_]))
+            M, _ = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, c.meas[s_] - nom_alt[c.name].columns[s_]))
+            keep = np.abs(X0) > 0
+            G = np.where(keep[None, :], Hp / np.where(keep, X0, 1.0)[None, :], 0.0)
+            X1, _ = est.solve_fourier(M, G, W)
+            X1 = np.where(keep, X1, 0.0)
+            X1s[cand.element] = X1
+            Gs[cand.element] = (G, W, keep)
+            # a harmonic of complex amplitude Y carries |Y|^2 / 2 per sample
+            i = 0
+            for c in fit:
+                if not d.orders_for(c, cand.key):
+                    continue
+                nm = int(c.mask.sum())
+                for s_ in c.sensors:
+                    gain = float(np.sum(np.abs(M[i]) ** 2 - np.abs(M[i] - G[i] * X1) ** 2))
+                    e2[s_] -= 0.5 * nm * gain
+                    i += 1
+        nr_pred = {s_: math.sqrt(max(e2[s_], 0.0) / d2[s_]) if d2[s_] > 0 else float("nan") for s_ in sensors}
+        entry["predicted_nrmse"] = nr_pred
+        entry["predicted_score"] = float(sum(v ** 2 for v in nr_pred.values()))
+        stage_a.append((entry, alt0, X1s, Gs))
+        log.info("  form %-26s predicted sum NRMSE^2 %.4g (as modelled %.4g)", name, entry["predicted_score"],
+                 cur_score)
+    # stage B, the two best predicted: simulate with X1 and one Gauss-Newton step
+    stage_a.sort(key=lambda x: x[0]["predicted_score"])
+    for entry, alt0, X1s, Gs in stage_a[:2]:
+        name = entry["name"]
+        try:
             sims1 = sim_fit(with_all(alt0, X1s), f"structure {name} refined")
             nr1, sc1 = _score(d, sims1)
-            # one Gauss-Newton step with the same gains
             X2s = {}
             for cand, X0, _ in effs:
                 G, W, keep = Gs[cand.element]
-                Mp, _ = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, c.meas[s] - sims1[c.name].columns[s]))
+                Mp, _ = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, c.meas[s_] - sims1[c.name].columns[s_]))
                 dX, _ = est.solve_fourier(Mp, G, W)
                 X2s[cand.element] = np.where(keep, X1s[cand.element] + dX, 0.0)
             sims2 = sim_fit(with_all(alt0, X2s), f"structure {name} polish")
             nr2, sc2 = _score(d, sims2)
         except SimulationFailed as exc:
             entry["not_screened"] = f"simulation failed: {exc}"
-            d.structure["screened"].append(entry)
             continue
         if sc2 < sc1:
             nr1, sc1, X1s, sims1 = nr2, sc2, X2s, sims2
         entry.update({"nrmse": nr1, "score": sc1, "X": X1s, "doc": with_all(alt0, X1s), "sims": sims1})
         results.append(entry)
-        d.structure["screened"].append(entry)
         log.info("  form %-26s sum NRMSE^2 %.4g (as modelled %.4g)", name, sc1, cur_score)
+    for entry, alt0, X1s, Gs in stage_a[2:]:
+        entry["X"] = X1s   # the estimate in that form (predicted, not simulated)
     scored = [r for r in results if "score" in r]
     best = min(scored, key=lambda r: r["score"])
     chosen = results[0]
