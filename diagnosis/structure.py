@@ -244,7 +244,8 @@ def screen(d):
     # (2 simulations per fit run) give its gains, a re-estimate X1 and a predicted
     # score (the alternative's nominal residual minus the harmonic energy X1 explains)
     stage_a = []
-    for name, desc, sets in alternatives(d)[:max(0, d.opt.max_structures)]:
+
+    def stage_a_one(name, desc, sets):
         entry = {"name": name, "description": desc, "set": sets}
         d.structure["screened"].append(entry)
         try:
@@ -252,14 +253,14 @@ def screen(d):
             d.model.system(fit[0].run, alt0)  # the layout accepts the form?
         except Exception as exc:  # noqa: BLE001 - any rejection of the key: not screened, say why
             entry["not_screened"] = f"the layout does not accept it: {str(exc).splitlines()[0][:200]}"
-            continue
+            return
         try:
             nom_alt = sim_fit(alt0, f"structure {name} nominal")
             X0s = {cand.element: X0 for cand, X0, _ in effs}
             probe = sim_fit(with_all(alt0, X0s), f"structure {name} probe")
         except SimulationFailed as exc:
             entry["not_screened"] = f"simulation failed: {exc}"
-            continue
+            return
         X1s, Gs = {}, {}
         e2 = {s_: sum(float(np.sum((c.meas[s_] - nom_alt[c.name].columns[s_]) ** 2)) for c in fit
                       if s_ in c.sensors) for s_ in sensors}
@@ -289,6 +290,16 @@ def screen(d):
         stage_a.append((entry, alt0, X1s, Gs))
         log.info("  form %-26s predicted sum NRMSE^2 %.4g (as modelled %.4g)", name, entry["predicted_score"],
                  cur_score)
+
+    for name, desc, sets in alternatives(d)[:max(0, d.opt.max_structures)]:
+        stage_a_one(name, desc, sets)
+    # per drive: when no feed forward on every loop is the best predicted form, which drives?
+    best_a = min(stage_a, key=lambda x: x[0]["predicted_score"], default=None)
+    if best_a is not None and best_a[0]["name"] == "feedforward none" and len(best_a[0]["set"]) > 1:
+        for key in sorted(best_a[0]["set"]):
+            el = key.split(".")[2]
+            stage_a_one(f"feedforward none on {el}", f"the {el} speed loop feeds forward no tension torque",
+                        {key: False})
     # stage B, the two best predicted: simulate with X1 and one Gauss-Newton step
     stage_a.sort(key=lambda x: x[0]["predicted_score"])
     for entry, alt0, X1s, Gs in stage_a[:2]:
@@ -314,6 +325,10 @@ def screen(d):
         log.info("  form %-26s sum NRMSE^2 %.4g (as modelled %.4g)", name, sc1, cur_score)
     for entry, alt0, X1s, Gs in stage_a[2:]:
         entry["X"] = X1s   # the estimate in that form (predicted, not simulated)
+        d.rejected.append({"element": entry["name"], "kind": "structure", "stage": "structure screen",
+                           "reason": f"predicted sum of NRMSE^2 {entry['predicted_score']:.4g}, not among the "
+                                     f"two best ({', '.join(x[0]['name'] for x in stage_a[:2])})",
+                           "predicted_nrmse": entry["predicted_nrmse"]})
     scored = [r for r in results if "score" in r]
     best = min(scored, key=lambda r: r["score"])
     chosen = results[0]
@@ -335,6 +350,8 @@ def screen(d):
     # amplitude uncertainty over the forms that fit about as well
     room = max(nom_score - chosen["score"], 1e-12)
     as_well = [r for r in scored if r["score"] <= chosen["score"] + AS_WELL * room]
+    # forms only predicted (not among the two simulated) count by their predicted score
+    as_well += [x[0] for x in stage_a[2:] if x[0]["predicted_score"] <= chosen["score"] + AS_WELL * room]
     unc = {}
     for cand, X0, fe in effs:
         if fe is None and chosen is results[0]:
