@@ -393,7 +393,11 @@ def screen(d):
                     d.final_effects.append(fe2)
                     d.notes.append(f"{cand.kind} of {cand.element}, rejected in the layout's form, holds in "
                                    f"the form '{chosen['name']}'")
-        d.steps.append({"added": f"structure: {chosen['name']}", "kind": "structure", "sims": chosen["sims"],
+        sims_all = dict(chosen["sims"])
+        hold = [c for c in d.ctx if not c.fit]
+        if hold:  # the held-out runs see the chosen form too (never used for any estimate)
+            sims_all.update(d._simulate_all(chosen["doc"], f"refined, form {chosen['name']}", hold))
+        d.steps.append({"added": f"structure: {chosen['name']}", "kind": "structure", "sims": sims_all,
                         "check": chosen.get("check")})
         log.info("  model form: %s (%s)", chosen["name"], chosen["check"]["reason"])
     d.structure["as_modelled"] = {"nrmse": cur_nr, "score": cur_score}

@@ -225,20 +225,21 @@ def test_form_feedforward_none_found_and_run_out_recovered(tmp_path, monkeypatch
     tset = {f"drives.speed_loops.{e}.feedforward": False for e in loops}
     tset["path.unwind.eccentricity"] = {"C": [f"{c * 1e3} mm" for c in C], "psi": [f"{p} rad" for p in psi]}
     (tmp_path / "truth.yaml").write_text(yaml.safe_dump({"base": str(EWL), "set": tset}))
-    exp = {"duration": "20 s", "line_speed": "200 ft/min"}
-    system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp, "<run>", {}))
-    system.experiment.output_interval = 1.0 / 250.0
-    res = simulate_reference(system)
-    t = np.asarray(res.time)
-    rng = np.random.default_rng(11)
-    cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc15", "lc19")}
-    np.savetxt(tmp_path / "r1.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
-               header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
-    (tmp_path / "r1.yaml").write_text(yaml.safe_dump({"data": "r1.csv", "experiment": exp}))
+    for name, speed, dur, seed in (("r1", "200 ft/min", "20 s", 11), ("h1", "170 ft/min", "12 s", 12)):
+        exp = {"duration": dur, "line_speed": speed}
+        system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp, "<run>", {}))
+        system.experiment.output_interval = 1.0 / 250.0
+        res = simulate_reference(system)
+        t = np.asarray(res.time)
+        rng = np.random.default_rng(seed)
+        cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc15", "lc19")}
+        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
+                   header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp}))
 
     monkeypatch.setattr(master, "simulate", lambda system, fmu_paths=None, progress=False, **kw:
                         simulate_reference(system))
-    rep = diagnose(EWL, [tmp_path / "r1.yaml"], out=tmp_path / "out",
+    rep = diagnose(EWL, [tmp_path / "r1.yaml"], holdout=[tmp_path / "h1.yaml"], out=tmp_path / "out",
                    options=Options(fmu_paths={}, jobs=1, max_structures=2, harmonics=3))
     eff = rep["effects"][0]
     assert (eff["element"], eff["kind"]) == ("unwind", "out_of_round")
@@ -251,6 +252,11 @@ def test_form_feedforward_none_found_and_run_out_recovered(tmp_path, monkeypatch
     for s, g in rep["gap"].items():
         assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], s
         assert 0.0 < g["achievable"] < 1.0 and g["closed_share"] is not None
+    # held out (another speed, never fitted): the form and estimate carry over
+    for s, g in rep["holdout"]["out_of_sample"].items():
+        assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], s
+    g9 = rep["holdout"]["out_of_sample"]["lc9.T"]
+    assert g9["closed_share"] > 0.5
     # the noise floor comes from the data: 0.3 N was added
     for s, v in rep["noise_floor"]["r1"].items():
         assert v["rms_N"] == pytest.approx(0.3, rel=0.1), s
