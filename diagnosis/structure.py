@@ -199,8 +199,8 @@ def screen(d):
     why = triggers(d, left)
     d.structure = {"triggers": why, "screened": [], "chosen": None}
     effs = _effects_to_screen(d)
-    if not why or not effs:
-        log.info("  model form: %s", "no trigger" if not why else "no periodic effect to screen with")
+    if not why:
+        log.info("  model form: no trigger")
         return
     log.info("  model form suspect: %s", "; ".join(why))
     fit = d.fit_ctx()
@@ -257,7 +257,8 @@ def screen(d):
         try:
             nom_alt = sim_fit(alt0, f"structure {name} nominal")
             X0s = {cand.element: X0 for cand, X0, _ in effs}
-            probe = sim_fit(with_all(alt0, X0s), f"structure {name} probe")
+            # no periodic effect: the form alone (a slow residual that follows the speed)
+            probe = sim_fit(with_all(alt0, X0s), f"structure {name} probe") if effs else nom_alt
         except SimulationFailed as exc:
             entry["not_screened"] = f"simulation failed: {exc}"
             return
