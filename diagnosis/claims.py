@@ -134,12 +134,15 @@ def noise_floor(y, fs, f_lo, f_hi=None):
 
 def achievable_nrmse(noise_var, n_samples, sum_sq_dev):
     """NRMSE a perfect model reaches when the data carries white noise of
-    variance ``noise_var`` (per run): sqrt(sum var_k N_k / sum (y - mean)^2);
-    lists over runs or scalars."""
+    variance ``noise_var`` (per run): sqrt(sum var_k N_k / sum (y - mean)^2),
+    at most 1 (the data's variance holds the noise's); lists over runs or scalars."""
     v = np.atleast_1d(np.asarray(noise_var, float))
     n = np.atleast_1d(np.asarray(n_samples, float))
     d2 = float(np.sum(np.atleast_1d(np.asarray(sum_sq_dev, float))))
-    return math.sqrt(float(np.sum(v * n)) / d2) if d2 > 0 else float("nan")
+    if not d2 > 0:
+        return float("nan")
+    # var(y) = var(signal) + var(noise) >= var(noise): above 1 is the estimate's scatter
+    return min(1.0, math.sqrt(float(np.sum(v * n)) / d2))
 
 
 def closed_share(nominal, refined, achievable, min_room=0.02):

@@ -44,6 +44,7 @@ def test_closed_share_and_achievable_arithmetic():
     # two runs: variance 0.04 N^2 over 1000 samples and 0.09 over 3000; deviations 100 + 900
     ach = claims.achievable_nrmse([0.04, 0.09], [1000, 3000], [100.0, 900.0])
     assert ach == pytest.approx(math.sqrt((40.0 + 270.0) / 1000.0))
+    assert claims.achievable_nrmse(0.05, 1000, 48.0) == 1.0   # noise estimate above the data's variance
 
 
 def test_noise_floor_is_the_white_noise_under_lines_and_line_dynamics():
