@@ -351,9 +351,14 @@ def _verdict(rep):
     st = rep.get("structure") or {}
     if st.get("chosen") and st["chosen"] != "as modelled":
         extra += f" Model form: {st['chosen']}."
+    if not effs and st.get("chosen") and st["chosen"] != "as modelled":
+        g = "; ".join(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}"
+                      for s, v in rep["gap"].items() if v.get("nominal") and v.get("refined"))
+        return (f"no unmodelled effect; the model form differs: {st['chosen']}. {g}."
+                + extra.replace(f" Model form: {st['chosen']}.", ""))
     if not effs:
         above = [(s, v) for s, v in rep["gap"].items() if v.get("nominal") and v.get("achievable")
-                 and v["nominal"]["nrmse"] > 1.5 * v["achievable"]]
+                 and v["nominal"]["nrmse"] > 1.1 * v["achievable"]]
         if finds or above:
             g = "; ".join(f"{s}: NRMSE {v['nominal']['nrmse']:.3g}, noise allows {v['achievable']:.3g}"
                           for s, v in above)

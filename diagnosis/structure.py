@@ -230,6 +230,8 @@ def screen(d):
         return doc
 
     def left_energy(sims):
+        if not effs:  # the form alone: where it acts is the whole residual
+            return claims.local_energy(d, sims, ("all", None))[0]
         e = 0.0
         for cand, _, _ in effs:
             M, _ = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, c.meas[s] - sims[c.name].columns[s]))
