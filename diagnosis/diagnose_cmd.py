@@ -28,6 +28,10 @@ def parser():
     ap.add_argument("--no-polish", action="store_true", help="skip the Gauss-Newton polish simulation")
     ap.add_argument("--no-other", action="store_true",
                     help="do not screen backlash, compliance, sensor and parameter effects")
+    ap.add_argument("--no-structure", action="store_true",
+                    help="do not screen model-form alternatives (feed forward, loop gains, ...)")
+    ap.add_argument("--max-structures", type=int, default=8,
+                    help="model-form alternatives screened at most (default 8)")
     ap.add_argument("--jobs", type=int, default=None,
                     help="simulations run in parallel worker processes (default: 2 if the machine has 2+ cores)")
     ap.add_argument("--time", metavar="COL", default=None,
@@ -52,6 +56,7 @@ def main(argv=None):
         return 2
     opt = Options(harmonics=args.harmonics, max_effects=args.max_effects, significance=args.significance,
                   polish=not args.no_polish, other_effects=not args.no_other,
+                  structure=not args.no_structure, max_structures=args.max_structures,
                   progress=not args.quiet and sys.stderr.isatty(),
                   jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1),
                   time_column=args.time, time_unit=args.time_unit, engine=args.engine)

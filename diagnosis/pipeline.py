@@ -65,6 +65,9 @@ class Options:
     time_unit: str = None            # its unit when the header gives none
     jobs: int = 1                    # simulations in parallel (worker processes; co-simulation engine)
     engine: str = "fast"             # "fast": compiled monolithic ODE; "cosim": FMU co-simulation
+    max_worse: float = 0.02          # an effect may raise no sensor's NRMSE (fit runs) by more than this share
+    structure: bool = True           # screen model-form alternatives when an effect's check says so
+    max_structures: int = 8          # structural alternatives simulated at most
 
 
 class DiagnoseError(ValueError):
@@ -390,14 +393,17 @@ class Diagnosis:
 
     def which(self):
         fit = self.fit_ctx()
-        # speed-scale refinement of every family's angle, per fit run (model angles only)
-        for c in fit:
-            for k in self.cands:
-                orders = self.orders_for(c, k.key)
-                c.kappa[k.key] = 0.0
-                if not orders or c.theta_src[k.key] != "model" or self.opt.kappa_span <= 0:
-                    continue
-                kap = self._refine_kappa(c, k, orders)
+        # speed-scale refinement of a family's angle: only where the refined layout
+        # can carry it (an idle roller's radius, one value for every run); a
+        # driven or speed-governed element, and a roll whose radius each run sets,
+        # turns as the model says (its harmonics cannot be stretched onto another
+        # family's line)
+        for k in self.cands:
+            kap = 0.0
+            if self.kappa_allowed(k) and self.opt.kappa_span > 0 \
+                    and all(c.theta_src[k.key] == "model" for c in fit):
+                kap = self._refine_kappa_joint(fit, k)
+            for c in self.ctx:
                 c.kappa[k.key] = kap
         resid = {c.name: {s: c.periodic[s].copy() for s in c.sensors} for c in fit}
         total = sum(float(np.sum(c.periodic[s][c.mask] ** 2)) for c in fit for s in c.sensors)
@@ -462,25 +468,46 @@ class Diagnosis:
         if not self.effects:
             log.info("  no significant periodic family: the periodic residual is noise")
 
-    def _refine_kappa(self, c, k, orders):
-        """Speed scale of family k in run c (0 unless clearly better), on a decimated signal."""
-        m = c.mask
-        f_top = max(orders) * c.freq[k.key]
-        q = max(1, int(c.fs / max(8.0 * f_top, 20.0)))
-        Y = np.column_stack([est.lowpass(c.periodic[s], c.fs, 0.4 * c.fs / q)[m][::q] for s in c.sensors])
-        th = c.theta[k.key][m][::q]
-        ref = 0.5 * (th[0] + th[-1])
-        revs = abs(th[-1] - th[0]) / (2 * math.pi)
-        if revs < 3:
+    @staticmethod
+    def kappa_allowed(k):
+        """A speed scale is a radius error the refined layout carries as
+        ``path.<el>.radius``: idle (and load-cell) rollers only. A driven roller
+        turns at the speed its loop holds (the speed master at the reference),
+        and an unwind's or rewind's radius is set by each run."""
+        return k.model == "IdleRoller" and k.radius > 0
+
+    def _refine_kappa_joint(self, fit, k):
+        """One speed scale of family k over all fit runs (a radius is the same in
+        every run); 0 unless clearly better. On decimated signals."""
+        parts = []
+        hmax, revs_min = 1, math.inf
+        for c in fit:
+            orders = self.orders_for(c, k.key)
+            if not orders:
+                continue
+            m = c.mask
+            f_top = max(orders) * c.freq[k.key]
+            q = max(1, int(c.fs / max(8.0 * f_top, 20.0)))
+            Y = np.column_stack([est.lowpass(c.periodic[s], c.fs, 0.4 * c.fs / q)[m][::q] for s in c.sensors])
+            th = c.theta[k.key][m][::q]
+            revs = abs(th[-1] - th[0]) / (2 * math.pi)
+            if revs < 3:
+                continue
+            parts.append((Y, th, 0.5 * (th[0] + th[-1]), orders))
+            hmax, revs_min = max(hmax, max(orders)), min(revs_min, revs)
+        if not parts:
             return 0.0
-        hmax = max(orders)
+        revs = max(revs_min, max(abs(p[1][-1] - p[1][0]) / (2 * math.pi) for p in parts))
         step = 0.25 / (hmax * revs)
         n = int(min(200, math.ceil(self.opt.kappa_span / step)))
         grid = np.linspace(-self.opt.kappa_span, self.opt.kappa_span, 2 * n + 1)
 
         def energy(kap):
-            A = est.harmonic_basis(est.scaled_angle(th, kap, ref), orders)
-            return est.projected_energy(A, Y)
+            tot = 0.0
+            for Y, th, ref, orders in parts:
+                A = est.harmonic_basis(est.scaled_angle(th, kap, ref), orders)
+                tot += est.projected_energy(A, Y)
+            return tot
 
         e = np.array([energy(g) for g in grid])
         i = int(np.argmax(e))
@@ -515,7 +542,7 @@ class Diagnosis:
             jobs, keys = [], []
             for d in eff["group"]:
                 k = d["cand"]
-                doc = layout_edit.with_fourier(self.model.copy_doc(), k, np.full(H, a0), np.zeros(H))
+                doc = self.with_effect(self.model.copy_doc(), k, np.full(H, a0, complex))
                 for c in fit:
                     if self.orders_for(c, k.key):
                         jobs.append((c.run, doc, f"sensitivity {k.element}"))
@@ -599,7 +626,7 @@ class Diagnosis:
             return
         jobs, keys = [], []
         for r in tied:
-            doc = layout_edit.with_fourier(self.model.copy_doc(), r["cand"], np.abs(r["X"]), np.angle(r["X"]))
+            doc = self.with_effect(self.model.copy_doc(), r["cand"], r["X"])
             for c in fit:
                 jobs.append((c.run, doc, f"tie check {r['cand'].element}"))
                 keys.append((id(r), c))
@@ -660,28 +687,81 @@ class Diagnosis:
         self.other = others.screen(self)
 
     # -------------------------------------------------------------- 7 refine ----
+    def kappa_of(self, cand):
+        fit = self.fit_ctx()
+        return float(fit[0].kappa.get(cand.key, 0.0)) if fit else 0.0
+
+    def with_effect(self, doc, cand, X, add=False):
+        """``doc`` with the Fourier series X on ``cand`` and, if its angle was
+        speed-scaled (kappa), the radius that makes the model turn that way
+        (theta_true = (1 + kappa) theta_model = v t / R_true): every estimate is
+        made in the model the refined layout runs."""
+        X = np.asarray(X, complex)
+        doc = layout_edit.with_fourier(doc, cand, np.abs(X), np.angle(X), add=add)
+        kap = self.kappa_of(cand)
+        if kap and self.kappa_allowed(cand):
+            doc = layout_edit.with_set(doc, f"path.{cand.element}.radius", f"{cand.radius / (1.0 + kap):.9g} m")
+        return doc
+
     def refine(self):
-        """Add the effects one by one to the layout, re-simulate, measure the gap."""
+        """Add the effects one by one to the layout, re-simulate, measure the gap.
+
+        No claim without a check: an effect stays only if, re-simulated on the
+        fit runs, it lowers the residual where it acts (its harmonics on its own
+        angle; for a non-periodic effect the whole residual) and raises no
+        sensor's NRMSE by more than ``Options.max_worse`` (relative). An effect
+        that fails is taken out of the layout and goes to ``self.rejected``
+        with the numbers."""
+        from webline.diagnosis import claims
         from webline.diagnosis import metrics_ext as mx
         self.steps = []
+        if not hasattr(self, "rejected"):
+            self.rejected = []
         doc = self.model.copy_doc()
+        fit = self.fit_ctx()
         self.steps.append({"added": None, "sims": {c.name: c.nominal for c in self.ctx}})
         if self.opt.polish and self.final_effects:
             self._polish_all(doc)
+        cur = self.steps[0]["sims"]
+        kept = []
         for i, fe in enumerate(self.final_effects):
             b = fe["ranked"][0]
-            X = b["X"]
-            doc = layout_edit.with_fourier(doc, b["cand"], np.abs(X), np.angle(X), add=True)
-            sims = self._simulate_all(doc, f"refined +{b['cand'].element}")
-            self.steps.append({"added": b["cand"].element, "kind": b["cand"].kind, "sims": sims})
+            trial = self.with_effect(doc, b["cand"], b["X"], add=True)
+            sims = self._simulate_all(trial, f"refined +{b['cand'].element}")
+            chk = claims.check(self, cur, sims, local=("periodic", b["cand"]))
+            fe["check"] = chk
+            if not chk["accepted"]:
+                self._reject(b["cand"].element, b["cand"].kind, "refine check", chk,
+                             harmonics=[{"order": j + 1, "amplitude": float(abs(x))} for j, x in enumerate(b["X"])
+                                        if abs(x) > 0], _cand=b["cand"], _X=np.array(b["X"]), _fe=fe)
+                continue
+            doc, cur = trial, sims
+            kept.append(fe)
+            self.steps.append({"added": b["cand"].element, "kind": b["cand"].kind, "sims": sims, "check": chk})
+        self.final_effects = kept
+        others_kept = []
         for o in getattr(self, "other", []) or []:
-            doc = o["apply_doc"](doc)
-            sims = self._simulate_all(doc, f"refined +{o['element']} {o['kind']}")
-            self.steps.append({"added": o["element"], "kind": o["kind"], "sims": sims})
+            trial = o["apply_doc"](doc)
+            sims = self._simulate_all(trial, f"refined +{o['element']} {o['kind']}")
+            chk = claims.check(self, cur, sims, local=("all", None))
+            o["check"] = chk
+            if not chk["accepted"]:
+                self._reject(o["element"], o["kind"], "refine check", chk, detail=o.get("confidence_basis"))
+                continue
+            doc, cur = trial, sims
+            others_kept.append(o)
+            self.steps.append({"added": o["element"], "kind": o["kind"], "sims": sims, "check": chk})
+        self.other = others_kept
         self.refined_doc = doc
+        # model form: structural alternatives screened together with the effects
+        if self.opt.structure:
+            from webline.diagnosis import structure
+            t0 = _time.perf_counter()
+            structure.screen(self)
+            self.timings["structure"] = _time.perf_counter() - t0
         if self.out:
             self.out.mkdir(parents=True, exist_ok=True)
-            self.model.write_doc(doc, self.out / "refined_layout.yaml")
+            self.model.write_doc(self.refined_doc, self.out / "refined_layout.yaml")
         # metrics per step, run and sensor
         for st in self.steps:
             st["metrics"] = {}
@@ -689,6 +769,16 @@ class Diagnosis:
                 sim = st["sims"][c.name]
                 st["metrics"][c.name] = {s: mx.gap_metrics(c.t, c.meas[s], sim.columns[s], c.fs, c.mask)
                                          for s in c.sensors}
+
+    def _reject(self, element, kind, stage, chk=None, **extra):
+        entry = {"element": element, "kind": kind, "stage": stage}
+        if chk is not None:
+            entry.update({"reason": chk["reason"], "nrmse_before": chk["nrmse_before"],
+                          "nrmse_after": chk["nrmse_after"], "local_before": chk["local_before"],
+                          "local_after": chk["local_after"], "local_z_drop": chk.get("local_z_drop")})
+        entry.update(extra)
+        self.rejected.append(entry)
+        log.info("  rejected %s %s (%s): %s", kind, element, stage, entry.get("reason", ""))
 
     def _simulate_all(self, doc, label, ctxs=None):
         ctxs = self.ctx if ctxs is None else ctxs
@@ -717,7 +807,7 @@ class Diagnosis:
             trial = doc
             for fe in self.final_effects:
                 b = fe["ranked"][0]
-                trial = layout_edit.with_fourier(trial, b["cand"], np.abs(b["X"]), np.angle(b["X"]), add=True)
+                trial = self.with_effect(trial, b["cand"], b["X"], add=True)
             try:
                 sims = self._simulate_all(trial, f"polish {step + 1}", fit)
             except SimulationFailed as exc:

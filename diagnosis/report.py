@@ -31,21 +31,32 @@ def build(d):
         "timings_s": d.timings,
         "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall},
     }
+    from webline.diagnosis import claims
     fit = [c for c in d.ctx if c.fit]
     hold = [c for c in d.ctx if not c.fit]
     first, last = d.steps[0], d.steps[-1]
     sensors = list(dict.fromkeys(s for c in d.ctx for s in c.sensors))
-    rep["gap"] = {s: {"nominal": _agg(first, fit, s), "refined": _agg(last, fit, s),
-                      "by_run": {c.name: {"nominal": first["metrics"][c.name][s],
-                                          "refined": last["metrics"][c.name][s]}
-                                 for c in d.ctx if s in c.sensors}}
+    if not hasattr(d, "noise"):
+        d.noise = claims.sensor_noise(d)
+
+    def gap_entry(ctxs, s):
+        nom, ref = _agg(first, ctxs, s), _agg(last, ctxs, s)
+        if nom is None:
+            return {"nominal": None, "refined": None, "achievable": None, "closed_share": None}
+        ach = claims.achievable_for(d, d.noise, ctxs, s)
+        return {"nominal": nom, "refined": ref, "achievable": ach,
+                "closed_share": claims.closed_share(nom["nrmse"], ref["nrmse"], ach)}
+
+    rep["gap"] = {s: dict(gap_entry(fit, s),
+                          by_run={c.name: dict(gap_entry([c], s), **{
+                              "nominal": first["metrics"][c.name][s], "refined": last["metrics"][c.name][s]})
+                                  for c in d.ctx if s in c.sensors})
                   for s in sensors}
     rep["holdout"] = {
         "fit_runs": [c.name for c in fit],
         "holdout_runs": [c.name for c in hold],
-        "in_sample": {s: {"nominal": _agg(first, fit, s), "refined": _agg(last, fit, s)} for s in sensors},
-        "out_of_sample": ({s: {"nominal": _agg(first, hold, s), "refined": _agg(last, hold, s)}
-                           for s in sensors} if hold else None),
+        "in_sample": {s: gap_entry(fit, s) for s in sensors},
+        "out_of_sample": ({s: gap_entry(hold, s) for s in sensors} if hold else None),
     }
     prev = None
     for st in d.steps:
@@ -59,6 +70,11 @@ def build(d):
         prev = row
     rep["remaining_peaks"] = _remaining(d)
     rep["across_runs"] = _across_runs(d, rep)
+    rep["noise_floor"] = {r: {s: {k: v for k, v in x.items()} for s, x in per.items()} for r, per in d.noise.items()}
+    rep["left"] = claims.leftovers(d, d.noise, rep["remaining_peaks"])
+    rep["findings"] = claims.humps(d, d.noise)
+    rep["rejected"] = _rejected(d)
+    rep["structure"] = getattr(d, "structure", None)
     rep["verdict"] = _verdict(rep)
     if d.out:
         out = Path(d.out)
@@ -131,7 +147,13 @@ def _effects(d):
             "pattern_misfit": b["misfit"],
             "angle_source": {c.name: c.theta_src[k.key] for c in d.ctx},
             "tension_harmonics": _tension_harmonics(d, b),
+            "check": fe.get("check"),
+            "model_form": fe.get("structure", "as modelled"),
+            "amplitude_uncertainty": ((getattr(d, "structure", None) or {}).get("amplitude_uncertainty") or {})
+            .get(k.element),
         }
+        if d.kappa_allowed(k) and d.kappa_of(k):
+            eff["radius_m"] = {"nominal": k.radius, "estimated": k.radius / (1.0 + d.kappa_of(k))}
         out.append(eff)
     for o in getattr(d, "other", []) or []:
         out.append({k: v for k, v in o.items() if not callable(v) and not k.startswith("_") and k != "line"})
@@ -278,10 +300,71 @@ def _across_runs(d, rep):
     return out
 
 
+def _rejected(d):
+    """Everything screened and dropped, with the numbers that dropped it: effects
+    the refine check took out, structural alternatives not chosen, the greedy
+    periodic screen's best families that missed a threshold, the non-periodic
+    candidates that explained too little."""
+    out = [{k: v for k, v in r.items() if not k.startswith("_")} for r in getattr(d, "rejected", [])]
+    opt = d.opt
+    for i, step in enumerate(getattr(d, "screen_log", []) or []):
+        chosen = {e["element"] for fe in getattr(d, "effects", []) for e in
+                  [{"element": g["cand"].element} for g in fe["group"]]}
+        for e in step[:5]:
+            if e["element"] in chosen:
+                continue
+            why = []
+            if not e["log10_p"] < opt.significance:
+                why.append(f"log10 p {e['log10_p']:.3g} >= {opt.significance:g}")
+            if e["share"] < opt.min_share:
+                why.append(f"share {100 * e['share']:.2g} % < {100 * opt.min_share:g} %")
+            if e["coherence"] < opt.min_coherence:
+                why.append(f"coherence {e['coherence']:.2f} < {opt.min_coherence:g}")
+            if not why:
+                why.append("weaker than the family chosen at this step")
+            out.append({"element": e["element"], "kind": e["kind"], "stage": f"periodic screen step {i + 1}",
+                        "reason": "; ".join(why), "explained_share": e["share"], "log10_p": e["log10_p"],
+                        "coherence": e["coherence"]})
+    from webline.diagnosis.others import MIN_SHARE
+    kept = {(o["element"], o["kind"]) for o in getattr(d, "other", []) or []}
+    for entry in getattr(d, "other_log", []) or []:
+        for r in entry.get("screened", []):
+            if (r["element"], r["kind"]) in kept:
+                continue
+            out.append({"element": r["element"], "kind": r["kind"], "stage": "other-effects screen",
+                        "reason": (f"explains {100 * r['share']:.1f} % of the residual left (needs "
+                                   f"{100 * MIN_SHARE:.0f} %)" if r["share"] < MIN_SHARE
+                                   else "explains less than the candidate chosen"),
+                        "explained_share": r["share"], "detail": r.get("detail")})
+    return out
+
+
 def _verdict(rep):
     effs = rep["effects"]
+    finds = [f["text"] for f in rep.get("findings") or []]
+    rej = [r for r in rep.get("rejected") or [] if r.get("stage") in ("refine check", "structure check")]
+    extra = ""
+    if finds:
+        extra += " Findings: " + "; ".join(finds[:3]) + "."
+    if rej:
+        extra += f" {len(rej)} effect(s) rejected by the check (see 'rejected')."
+    st = rep.get("structure") or {}
+    if st.get("chosen") and st["chosen"] != "as modelled":
+        extra += f" Model form: {st['chosen']}."
+    if not effs and st.get("chosen") and st["chosen"] != "as modelled":
+        g = "; ".join(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}"
+                      for s, v in rep["gap"].items() if v.get("nominal") and v.get("refined"))
+        return (f"no unmodelled effect; the model form differs: {st['chosen']}. {g}."
+                + extra.replace(f" Model form: {st['chosen']}.", ""))
     if not effs:
-        return "no unmodelled effect found: the residual is noise at the level the data can resolve"
+        above = [(s, v) for s, v in rep["gap"].items() if v.get("nominal") and v.get("achievable")
+                 and v["nominal"]["nrmse"] > 1.1 * v["achievable"]]
+        if finds or above:
+            g = "; ".join(f"{s}: NRMSE {v['nominal']['nrmse']:.3g}, noise allows {v['achievable']:.3g}"
+                          for s, v in above)
+            return ("no unmodelled effect passed the check; the residual is above the noise floor"
+                    + (f" ({g})" if g else "") + "." + extra)
+        return "no unmodelled effect found: the residual is noise at the level the data can resolve." + extra
     parts = []
     for e in effs:
         c = ", ".join(x["element"] for x in e["candidates"]) if len(e.get("candidates", [])) > 1 else e["element"]
@@ -292,8 +375,9 @@ def _verdict(rep):
     g = []
     for s, v in rep["gap"].items():
         if v["nominal"] and v["refined"]:
-            g.append(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}")
-    return "; ".join(parts) + ". " + "; ".join(g)
+            g.append(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}"
+                     + (f" (noise allows {v['achievable']:.3g})" if v.get("achievable") is not None else ""))
+    return "; ".join(parts) + ". " + "; ".join(g) + "." + extra
 
 
 def _clean(o):
@@ -367,10 +451,35 @@ def html_report(d, rep):
                          f"<td>{_fmt(100 * ef['explained_share'], 3)} %</td><td>{_fmt(ef['confidence'], 2)}</td>"
                          f"<td class=l>{e(C)}</td></tr>")
         parts.append("</table>")
+    if rep.get("findings"):
+        parts.append("<h2>Findings</h2><ul>" + "".join(f"<li>{e(f['text'])}</li>" for f in rep["findings"]) + "</ul>")
+    st = rep.get("structure")
+    if st and st.get("triggers"):
+        parts.append("<h2>Model form</h2><p>Screened because: " + e("; ".join(st["triggers"])) + "</p>"
+                     f"<p>Chosen: <b>{e(str(st.get('chosen')))}</b></p><table><tr><th>form</th>"
+                     "<th>sum NRMSE<sup>2</sup></th><th>NRMSE per sensor</th><th>note</th></tr>")
+        rows = [("as modelled", st.get("as_modelled", {}))] + [(r["name"], r) for r in st.get("screened", [])]
+        for name, r in rows:
+            nr = ", ".join(f"{k}: {_fmt(v)}" for k, v in (r.get("nrmse") or {}).items())
+            parts.append(f"<tr><td class=l>{e(name)}</td><td>{_fmt(r.get('score'))}</td><td class=l>{e(nr)}</td>"
+                         f"<td class=l>{e(str(r.get('not_screened') or (r.get('check') or {}).get('reason') or ''))}</td></tr>")
+        parts.append("</table>")
+        for el, u in (st.get("amplitude_uncertainty") or {}).items():
+            parts.append(f"<p>{e(el)}: order {u['dominant_order']} amplitude {1e6 * u['amplitude']:.1f} &micro;m "
+                         f"(forms that fit about as well: {1e6 * u['range'][0]:.1f}-{1e6 * u['range'][1]:.1f} &micro;m)"
+                         + (f"; {e(u['note'])}" if u.get("note") else "") + "</p>")
+    if rep.get("rejected"):
+        parts.append("<h2>Rejected</h2><table><tr><th>element</th><th>kind</th><th>stage</th><th>reason</th></tr>")
+        for r in rep["rejected"][:40]:
+            parts.append(f"<tr><td class=l>{e(str(r['element']))}</td><td class=l>{e(str(r['kind']))}</td>"
+                         f"<td class=l>{e(str(r['stage']))}</td><td class=l>{e(str(r.get('reason', '')))}</td></tr>")
+        parts.append("</table>")
     # gap table
-    parts.append("<h2>Gap before / after</h2><table><tr><th>sensor</th><th>runs</th><th>model</th>"
+    parts.append("<h2>Gap before / after</h2><p>achievable: the NRMSE the noise floor estimated from the data "
+                 "allows; closed: (nominal - refined) / (nominal - achievable).</p>"
+                 "<table><tr><th>sensor</th><th>runs</th><th>model</th>"
                  "<th>NRMSE</th><th>fit %</th><th>L1 (N s)</th><th>L2 (N<sup>2</sup> s)</th>"
-                 "<th>L&infin; (N)</th><th>spectral peak err</th></tr>")
+                 "<th>L&infin; (N)</th><th>spectral peak err</th><th>achievable</th><th>closed</th></tr>")
     for label, key in (("fit", "in_sample"), ("held out", "out_of_sample")):
         block = rep["holdout"].get(key)
         if not block:
@@ -383,7 +492,9 @@ def html_report(d, rep):
                 parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{label}</td><td class=l>{m}</td>"
                              f"<td>{_fmt(g['nrmse'])}</td><td>{_fmt(g['fit_percent'])}</td><td>{_fmt(g['l1'])}</td>"
                              f"<td>{_fmt(g['l2'])}</td><td>{_fmt(g['linf'])}</td>"
-                             f"<td>{_fmt(g.get('spectral_peak_error'))}</td></tr>")
+                             f"<td>{_fmt(g.get('spectral_peak_error'))}</td>"
+                             + (f"<td>{_fmt(v.get('achievable'))}</td><td>{_fmt(v.get('closed_share'))}</td>"
+                                if m == "refined" else "<td></td><td></td>") + "</tr>")
     parts.append("</table>")
     if len(rep["steps"]) > 2:
         parts.append("<h3>Per effect added (fit runs, cumulative)</h3><table><tr><th>step</th><th>sensor</th>"
@@ -393,6 +504,20 @@ def html_report(d, rep):
                 if g:
                     parts.append(f"<tr><td class=l>{e(str(st['added'] or 'nominal'))}</td><td class=l>{e(s)}</td>"
                                  f"<td>{_fmt(g['nrmse'])}</td><td>{_fmt(g['fit_percent'])}</td></tr>")
+        parts.append("</table>")
+    # what is left
+    if rep.get("left"):
+        parts.append("<h2>Left after refinement</h2><table><tr><th>sensor</th><th>effect</th><th>orders</th>"
+                     "<th>share left</th><th>significant</th></tr>")
+        for s, v in rep["left"].items():
+            for ef in v["effects"]:
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>{e(ef['kind'])} of {e(ef['element'])}</td>"
+                             f"<td class=l>{e(', '.join(map(str, ef['orders'])))}</td><td>{_fmt(ef['share_left'])}</td>"
+                             f"<td class=l>{'yes' if ef['significant'] else 'no'}</td></tr>")
+            if v["untagged_peaks_left"]:
+                pk = ", ".join(f"{p['frequency_hz']:.3g} Hz" for p in v["untagged_peaks_left"][:6])
+                parts.append(f"<tr><td class=l>{e(s)}</td><td class=l>untagged peaks</td><td class=l colspan=3>"
+                             f"{e(pk)}</td></tr>")
         parts.append("</table>")
     # where
     parts.append("<h2>Where model and data differ</h2>")

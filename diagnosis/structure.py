@@ -1,0 +1,422 @@
+"""Model form, not only parameters: structural alternatives screened together with the effects.
+
+An effect estimated in a model of the wrong form can fit the lines it was
+found on and still be off by a large factor: the span-length -> tension gain
+at the effect's frequency depends on how the drives react (a speed loop that
+feeds forward the *measured* tension cancels much of a slow tension
+disturbance; one that feeds forward the set point does not). When the
+checks say the form is suspect, each alternative form is simulated **with
+the effects re-estimated in it**:
+
+1. triggers (any): a reported effect's own harmonics stay after refinement on
+   some sensor (significant, more than ``LEFT_SHARE`` of what was there); a
+   periodic effect was rejected by the check; per-run estimates of one
+   effect disagree beyond their noise; the slow refined residual follows the
+   speed profile;
+2. per alternative (derived layout): the alternative's nominal simulation and
+   one with the current estimates X0 give the gains G_alt = (H_probe -
+   H_nominal) / X0 per (run, sensor, order); the measured harmonics of data
+   - alternative nominal give X1 = M / G_alt (least squares); one
+   Gauss-Newton step from the simulation with X1; the better of the two;
+3. the alternative with the lowest sum over sensors of NRMSE^2 (fit runs)
+   replaces the model only through the check of :mod:`diagnosis.claims`
+   against the refined model (no sensor worse by more than 2 %, the residual
+   at the effects' orders lower);
+4. the amplitudes come with the range over every form that fits about as
+   well (within 10 % of the best improvement); a dominant-order range wider
+   than a factor 2 is reported as not identifiable from these runs.
+"""
+import copy
+import logging
+import math
+
+import numpy as np
+
+from webline.diagnosis import claims
+from webline.diagnosis import estimate as est
+from webline.diagnosis import layout_edit
+from webline.diagnosis.line_model import SimulationFailed
+
+log = logging.getLogger("webline.diagnose")
+
+LEFT_SHARE = 0.25        # harmonics left / nominal on a sensor that make the form suspect
+AS_WELL = 0.10           # share of the best improvement within which a form fits "about as well"
+NOT_IDENTIFIABLE = 2.0   # dominant-order amplitude range (max/min) beyond which it is not identifiable
+
+
+def alternatives(d):
+    """[(name, description, {dotted key: value})] in screening order."""
+    from webline.diagnosis import others
+    base = others._base(d)
+    sl = sorted((base.get("drives", {}) or {}).get("speed_loops", {}) or {})
+    tl = sorted((base.get("drives", {}) or {}).get("tension_loops", {}) or {})
+    lcs = sorted(base.get("sensors", {}) or {})
+    out = []
+    if sl:
+        out.append(("feedforward none", "speed loops feed forward no tension torque",
+                    {f"drives.speed_loops.{x}.feedforward": False for x in sl}))
+        out.append(("feedforward reference", "speed loops feed forward the tension set points",
+                    {f"drives.speed_loops.{x}.feedforward": "reference" for x in sl}))
+    pc = {name: (edit, values) for name, edit, values in others.parameter_candidates(d)}
+    for name, label in (("speed_gain", "speed-loop gains"), ("tension_gain", "tension-loop gains")):
+        if name in pc:
+            edit, values = pc[name]
+            for f in (0.5, 2.0):
+                doc = edit({"base": "", "set": {}}, f)
+                out.append((f"{name} x{f:g}", f"{label} x {f:g}", dict(doc["set"])))
+    if sl:
+        out.append(("acceleration feedforward", "speed loops feed forward J dw_ref/dt",
+                    {f"drives.speed_loops.{x}.acceleration_feedforward": True for x in sl}))
+    if lcs:
+        out.append(("load-cell filter order 2", "second-order load-cell filters",
+                    {f"sensors.{x}.filter_order": 2 for x in lcs}))
+    out.append(("web damping 2 ms", "Kelvin-Voigt web, damping time 2 ms", {"web.damping": "2 ms"}))
+    del tl
+    return out
+
+
+def _apply(doc, sets):
+    doc = copy.deepcopy(doc)
+    doc.setdefault("set", {}).update(sets)
+    return doc
+
+
+def triggers(d, left):
+    """Why the model form is suspect (list of strings, empty = not suspect)."""
+    out = []
+    for s, v in left.items():
+        for e in v["effects"]:
+            if e["significant"] and e["share_left"] is not None and e["share_left"] > LEFT_SHARE:
+                out.append(f"{e['kind']} of {e['element']}: {100 * e['share_left']:.0f} % of its harmonics "
+                           f"stay on {s} after refinement")
+    for r in getattr(d, "rejected", []):
+        if r.get("stage") == "refine check" and r["kind"] in ("eccentricity", "out_of_round"):
+            out.append(f"{r['kind']} of {r['element']} rejected by the check ({r.get('reason')})")
+    for fe in d.final_effects:
+        dis = per_run_disagreement(d, fe["ranked"][0])
+        if dis:
+            out.append(dis)
+    fit = d.fit_ctx()
+    last = d.steps[-1]["sims"]
+    for c in fit:
+        v = c.speed - np.mean(c.speed)
+        if np.ptp(c.speed) < 0.02 * max(np.max(np.abs(c.speed)), 1e-9):
+            continue
+        for s in c.sensors:
+            r = c.meas[s] - last[c.name].columns[s]
+            slow = est.lowpass(r - np.mean(r), c.fs, c.fc)
+            if np.std(slow) < 0.2 * np.std(r):
+                continue
+            for sig, lab in ((v, "speed"), (np.gradient(c.speed, c.t), "acceleration")):
+                cc = np.corrcoef(slow, sig)[0, 1] if np.std(sig) > 0 else 0.0
+                if abs(cc) > 0.5:
+                    out.append(f"the slow residual of {s} in run {c.name} follows the line {lab} (r = {cc:.2f})")
+                    break
+    return list(dict.fromkeys(out))
+
+
+def per_run_disagreement(d, b):
+    """A roll's run-out is the same at every speed: per-run estimates of the
+    dominant order must agree within their noise (sigma^2 = 1 / sum_k |G_k|^2
+    T_k / (2 S_k), the harmonic's noise over the sensors). A message if not."""
+    fit = [c for c in d.fit_ctx() if d.orders_for(c, b["cand"].key)]
+    if len(fit) < 2 or b.get("G") is None:
+        return None
+    j = int(np.argmax(np.abs(b["X"])))
+    rows, i = {}, 0
+    for c in fit:
+        rows[c.name] = list(range(i, i + len(c.sensors)))
+        i += len(c.sensors)
+    if i != b["G"].shape[0]:
+        return None
+    est_run = {}
+    for c in fit:
+        r = rows[c.name]
+        G, M, W = b["G"][r, j], b["M"][r, j], b["W"][r]
+        den = float(np.sum(W * np.abs(G) ** 2))
+        if den <= 0:
+            continue
+        x = complex(np.sum(W * np.conj(G) * M) / den)
+        var = 1.0 / max(float(np.sum(np.abs(G) ** 2 * c.T / (2.0 / W))), 1e-300)
+        est_run[c.name] = (abs(x), math.sqrt(var))
+    names = list(est_run)
+    for a in range(len(names)):
+        for bb in range(a + 1, len(names)):
+            (xa, sa), (xb, sb) = est_run[names[a]], est_run[names[bb]]
+            if abs(xa - xb) > 3.0 * math.hypot(sa, sb) and abs(xa - xb) > 0.1 * max(xa, xb):
+                return (f"{b['cand'].kind} of {b['cand'].element}: order {j + 1} estimated "
+                        f"{1e6 * xa:.0f} um in run {names[a]} and {1e6 * xb:.0f} um in run {names[bb]} "
+                        f"(noise {1e6 * math.hypot(sa, sb):.0f} um)")
+    return None
+
+
+def _effects_to_screen(d):
+    """(cand, X0) of the reported periodic effects and of the periodic ones the check rejected."""
+    out = [(fe["ranked"][0]["cand"], np.array(fe["ranked"][0]["X"], complex), fe) for fe in d.final_effects]
+    for r in getattr(d, "rejected", []):
+        if r.get("_cand") is not None and r.get("_X") is not None:
+            out.append((r["_cand"], np.array(r["_X"], complex), None))
+    return out
+
+
+def _harmonics(d, c, cand, y_minus_model):
+    orders = d.orders_for(c, cand.key)
+    th = d._theta_refined(c, cand)
+    r = est.split_slow_periodic(y_minus_model, c.fs, c.fc)[1]
+    return orders, est.fit_harmonics(r, th, orders, c.mask)
+
+
+def _stack(d, cand, fn):
+    """Rows over (fit run, sensor) of fn(c, s) -> (orders, Y), into [rows, H]."""
+    H = d.opt.harmonics
+    rows, W = [], []
+    for c in d.fit_ctx():
+        if not d.orders_for(c, cand.key):
+            continue
+        for s in c.sensors:
+            orders, Y = fn(c, s)
+            m = np.zeros(H, complex)
+            for j, y in zip(orders, Y):
+                m[j - 1] = y
+            rows.append(m)
+            W.append(1.0 / max(float(np.median(c.floors[s].S)), 1e-300))
+    return np.array(rows), np.array(W)
+
+
+def _score(d, sims):
+    fit = d.fit_ctx()
+    sensors = list(dict.fromkeys(s for c in fit for s in c.sensors))
+    nr = {s: claims.nrmse_over(fit, sims, s) for s in sensors}
+    return nr, float(sum(v ** 2 for v in nr.values()))
+
+
+def screen(d):
+    """Screen the model-form alternatives; may replace ``d.refined_doc`` and the
+    effects' estimates, appends a step; records ``d.structure``."""
+    if not hasattr(d, "noise"):
+        d.noise = claims.sensor_noise(d)
+    left = claims.leftovers(d, d.noise, {})
+    why = triggers(d, left)
+    d.structure = {"triggers": why, "screened": [], "chosen": None}
+    effs = _effects_to_screen(d)
+    if not why:
+        log.info("  model form: no trigger")
+        return
+    log.info("  model form suspect: %s", "; ".join(why))
+    fit = d.fit_ctx()
+    cur_sims = d.steps[-1]["sims"]
+    cur_nr, cur_score = _score(d, cur_sims)
+    nom_nr, nom_score = _score(d, {c.name: c.nominal for c in fit})
+    base_doc = d.refined_doc
+    zero = base_doc
+    for cand, X0, _ in effs:
+        zero = layout_edit.with_fourier(zero, cand, np.zeros(len(X0)), np.zeros(len(X0)))
+    results = [{"name": "as modelled", "description": "the layout's own form", "set": {},
+                "nrmse": cur_nr, "score": cur_score,
+                "X": {cand.element: X0 for cand, X0, fe in effs if fe is not None}, "doc": base_doc,
+                "sims": cur_sims}]
+
+    def sim_fit(doc, label):
+        out = {}
+        for c, sim in zip(fit, d.model.simulate_many([(c.run, doc, label) for c in fit])):
+            if isinstance(sim, Exception):
+                raise SimulationFailed(str(sim).splitlines()[0] if str(sim) else "failed")
+            out[c.name] = sim
+        return out
+
+    def with_all(doc, Xs):
+        for cand, _, _ in effs:
+            doc = d.with_effect(doc, cand, Xs[cand.element])
+        return doc
+
+    def left_energy(sims):
+        if not effs:  # the form alone: where it acts is the whole residual
+            return claims.local_energy(d, sims, ("all", None))[0]
+        e = 0.0
+        for cand, _, _ in effs:
+            M, _ = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, c.meas[s] - sims[c.name].columns[s]))
+            e += float(np.sum(np.abs(M) ** 2))
+        return e
+
+    e_cur = left_energy(cur_sims)
+    sensors = list(dict.fromkeys(s_ for c in fit for s_ in c.sensors))
+    d2 = {s_: sum(float(np.sum((c.meas[s_] - np.mean(c.meas[s_])) ** 2)) for c in fit if s_ in c.sensors)
+          for s_ in sensors}
+    # stage A, every alternative: its nominal and a probe with the current estimates
+    # (2 simulations per fit run) give its gains, a re-estimate X1 and a predicted
+    # score (the alternative's nominal residual minus the harmonic energy X1 explains)
+    stage_a = []
+
+    def stage_a_one(name, desc, sets):
+        entry = {"name": name, "description": desc, "set": sets}
+        d.structure["screened"].append(entry)
+        try:
+            alt0 = _apply(zero, sets)
+            d.model.system(fit[0].run, alt0)  # the layout accepts the form?
+        except Exception as exc:  # noqa: BLE001 - any rejection of the key: not screened, say why
+            entry["not_screened"] = f"the layout does not accept it: {str(exc).splitlines()[0][:200]}"
+            return
+        try:
+            nom_alt = sim_fit(alt0, f"structure {name} nominal")
+            X0s = {cand.element: X0 for cand, X0, _ in effs}
+            # no periodic effect: the form alone (a slow residual that follows the speed)
+            probe = sim_fit(with_all(alt0, X0s), f"structure {name} probe") if effs else nom_alt
+        except SimulationFailed as exc:
+            entry["not_screened"] = f"simulation failed: {exc}"
+            return
+        X1s, Gs = {}, {}
+        e2 = {s_: sum(float(np.sum((c.meas[s_] - nom_alt[c.name].columns[s_]) ** 2)) for c in fit
+                      if s_ in c.sensors) for s_ in sensors}
+        for cand, X0, _ in effs:
+            Hp, W = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, probe[c.name].columns[s_]
+                                                             - nom_alt[c.name].columns[s_]))
+            M, _ = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, c.meas[s_] - nom_alt[c.name].columns[s_]))
+            keep = np.abs(X0) > 0
+            G = np.where(keep[None, :], Hp / np.where(keep, X0, 1.0)[None, :], 0.0)
+            X1, _ = est.solve_fourier(M, G, W)
+            X1 = np.where(keep, X1, 0.0)
+            X1s[cand.element] = X1
+            Gs[cand.element] = (G, W, keep)
+            # a harmonic of complex amplitude Y carries |Y|^2 / 2 per sample
+            i = 0
+            for c in fit:
+                if not d.orders_for(c, cand.key):
+                    continue
+                nm = int(c.mask.sum())
+                for s_ in c.sensors:
+                    gain = float(np.sum(np.abs(M[i]) ** 2 - np.abs(M[i] - G[i] * X1) ** 2))
+                    e2[s_] -= 0.5 * nm * gain
+                    i += 1
+        nr_pred = {s_: math.sqrt(max(e2[s_], 0.0) / d2[s_]) if d2[s_] > 0 else float("nan") for s_ in sensors}
+        entry["predicted_nrmse"] = nr_pred
+        entry["predicted_score"] = float(sum(v ** 2 for v in nr_pred.values()))
+        stage_a.append((entry, alt0, X1s, Gs))
+        log.info("  form %-26s predicted sum NRMSE^2 %.4g (as modelled %.4g)", name, entry["predicted_score"],
+                 cur_score)
+
+    for name, desc, sets in alternatives(d)[:max(0, d.opt.max_structures)]:
+        stage_a_one(name, desc, sets)
+    # per drive: when no feed forward on every loop is the best predicted form, which drives?
+    best_a = min(stage_a, key=lambda x: x[0]["predicted_score"], default=None)
+    if best_a is not None and best_a[0]["name"] == "feedforward none" and len(best_a[0]["set"]) > 1:
+        for key in sorted(best_a[0]["set"]):
+            el = key.split(".")[2]
+            stage_a_one(f"feedforward none on {el}", f"the {el} speed loop feeds forward no tension torque",
+                        {key: False})
+    # stage B, the two best predicted: simulate with X1 and one Gauss-Newton step
+    stage_a.sort(key=lambda x: x[0]["predicted_score"])
+    for entry, alt0, X1s, Gs in stage_a[:2]:
+        name = entry["name"]
+        try:
+            sims1 = sim_fit(with_all(alt0, X1s), f"structure {name} refined")
+            nr1, sc1 = _score(d, sims1)
+            X2s = {}
+            for cand, X0, _ in effs:
+                G, W, keep = Gs[cand.element]
+                Mp, _ = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, c.meas[s_] - sims1[c.name].columns[s_]))
+                dX, _ = est.solve_fourier(Mp, G, W)
+                X2s[cand.element] = np.where(keep, X1s[cand.element] + dX, 0.0)
+            sims2 = sim_fit(with_all(alt0, X2s), f"structure {name} polish")
+            nr2, sc2 = _score(d, sims2)
+        except SimulationFailed as exc:
+            entry["not_screened"] = f"simulation failed: {exc}"
+            continue
+        if sc2 < sc1:
+            nr1, sc1, X1s, sims1 = nr2, sc2, X2s, sims2
+        entry.update({"nrmse": nr1, "score": sc1, "X": X1s, "doc": with_all(alt0, X1s), "sims": sims1})
+        results.append(entry)
+        log.info("  form %-26s sum NRMSE^2 %.4g (as modelled %.4g)", name, sc1, cur_score)
+    for entry, alt0, X1s, Gs in stage_a[2:]:
+        entry["X"] = X1s   # the estimate in that form (predicted, not simulated)
+        d.rejected.append({"element": entry["name"], "kind": "structure", "stage": "structure screen",
+                           "reason": f"predicted sum of NRMSE^2 {entry['predicted_score']:.4g}, not among the "
+                                     f"two best ({', '.join(x[0]['name'] for x in stage_a[:2])})",
+                           "predicted_nrmse": entry["predicted_nrmse"]})
+    scored = [r for r in results if "score" in r]
+    best = min(scored, key=lambda r: r["score"])
+    chosen = results[0]
+    if best is not results[0]:
+        e_best = left_energy(best["sims"])
+        ok, reason = claims.decide(cur_nr, best["nrmse"], e_cur, e_best, None, d.opt.max_worse)
+        best["check"] = {"accepted": ok, "reason": reason, "local_before": e_cur, "local_after": e_best}
+        if ok:
+            chosen = best
+        else:
+            d.rejected.append({"element": best["name"], "kind": "structure", "stage": "structure check",
+                               "reason": reason, "nrmse_before": cur_nr, "nrmse_after": best["nrmse"],
+                               "local_before": e_cur, "local_after": e_best})
+    for r in scored:
+        if r is not chosen and r is not results[0]:
+            d.rejected.append({"element": r["name"], "kind": "structure", "stage": "structure screen",
+                               "reason": f"sum of NRMSE^2 {r['score']:.4g} vs {chosen['score']:.4g} "
+                                         f"({chosen['name']})", "nrmse_after": r["nrmse"]})
+    # amplitude uncertainty over the forms that fit about as well
+    room = max(nom_score - chosen["score"], 1e-12)
+    as_well = [r for r in scored if r["score"] <= chosen["score"] + AS_WELL * room]
+    # forms only predicted (not among the two simulated) count by their predicted score
+    as_well += [x[0] for x in stage_a[2:] if x[0]["predicted_score"] <= chosen["score"] + AS_WELL * room]
+    unc = {}
+    for cand, X0, fe in effs:
+        if fe is None and chosen is results[0]:
+            continue
+        Xc = chosen["X"].get(cand.element)
+        if Xc is None:
+            continue
+        j = int(np.argmax(np.abs(Xc)))
+        amps = {r["name"]: float(abs(r["X"][cand.element][j])) for r in as_well if cand.element in r["X"]}
+        lo, hi = min(amps.values()), max(amps.values())
+        ident = lo > 0 and hi / lo <= NOT_IDENTIFIABLE
+        unc[cand.element] = {
+            "dominant_order": j + 1, "amplitude": float(abs(Xc[j])), "range": [lo, hi],
+            "by_form": amps, "identifiable": bool(ident),
+            "range_by_order": [[float(min(abs(r["X"][cand.element][i]) for r in as_well if cand.element in r["X"])),
+                                float(max(abs(r["X"][cand.element][i]) for r in as_well if cand.element in r["X"]))]
+                               for i in range(len(Xc))]}
+        if not ident:
+            unc[cand.element]["note"] = (
+                f"the amplitude of {cand.element} is not identifiable from these runs: the forms "
+                f"{', '.join(amps)} fit about as well with order {j + 1} between {1e6 * lo:.0f} and "
+                f"{1e6 * hi:.0f} um; a run at another line speed (the forms' gains differ most at the "
+                f"effect's frequency) or with a tension set-point step would tell them apart")
+            d.notes.append(unc[cand.element]["note"])
+    d.structure["chosen"] = chosen["name"]
+    d.structure["chosen_set"] = chosen["set"]
+    d.structure["amplitude_uncertainty"] = unc
+    if chosen is not results[0]:
+        d.refined_doc = chosen["doc"]
+        for cand, X0, fe in effs:
+            if fe is not None:
+                fe["ranked"][0]["X"] = chosen["X"][cand.element]
+                fe["structure"] = chosen["name"]
+        # a rejected effect that the new form makes hold: back in (the form passed the check with it)
+        for cand, X0, fe in effs:
+            if fe is None:
+                fe2 = _readmit(d, cand, chosen["X"][cand.element])
+                if fe2 is not None:
+                    d.final_effects.append(fe2)
+                    d.notes.append(f"{cand.kind} of {cand.element}, rejected in the layout's form, holds in "
+                                   f"the form '{chosen['name']}'")
+        sims_all = dict(chosen["sims"])
+        hold = [c for c in d.ctx if not c.fit]
+        if hold:  # the held-out runs see the chosen form too (never used for any estimate)
+            sims_all.update(d._simulate_all(chosen["doc"], f"refined, form {chosen['name']}", hold))
+        d.steps.append({"added": f"structure: {chosen['name']}", "kind": "structure", "sims": sims_all,
+                        "check": chosen.get("check")})
+        log.info("  model form: %s (%s)", chosen["name"], chosen["check"]["reason"])
+    d.structure["as_modelled"] = {"nrmse": cur_nr, "score": cur_score}
+    for r in d.structure["screened"]:
+        if "X" in r:
+            r["harmonics_amplitude_m"] = {el: [float(abs(x)) for x in X] for el, X in r["X"].items()}
+        for k in ("doc", "sims", "X"):
+            r.pop(k, None)
+
+
+def _readmit(d, cand, X):
+    for r in d.rejected:
+        if r.get("_cand") is cand and r.get("_fe") is not None:
+            fe = r["_fe"]
+            fe["ranked"][0]["X"] = np.asarray(X, complex)
+            fe["readmitted"] = True
+            r["readmitted_in_form"] = d.structure["chosen"]
+            return fe
+    return None

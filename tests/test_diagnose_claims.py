@@ -1,0 +1,267 @@
+"""Mechanics of 'no claim without a check', what is left / possible, and the
+speed-scale rule (docs/diagnose.md, issue 9 items 1-3), on synthetic signals
+whose answers follow by hand."""
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from webline.diagnosis import claims
+from webline.diagnosis import estimate as est
+from webline.diagnosis import layout_edit
+from webline.diagnosis.candidates import Candidate
+from webline.diagnosis.line_model import Sim
+from webline.diagnosis.pipeline import Diagnosis, Options, RunCtx
+
+EWL = Path(__file__).resolve().parents[1] / "scenarios" / "ewl.yaml"
+
+
+# ----------------------------------------------------------------- decide ----
+def test_decide_rejects_a_sensor_made_worse_by_more_than_2_percent():
+    before = {"lc9.T": 1.0, "lc15.T": 0.50}
+    ok, why = claims.decide(before, {"lc9.T": 0.40, "lc15.T": 0.512}, 10.0, 1.0, 500.0)
+    assert not ok and "lc15.T" in why and "2.4 %" in why
+    ok, _ = claims.decide(before, {"lc9.T": 0.40, "lc15.T": 0.509}, 10.0, 1.0, 500.0)
+    assert ok
+
+
+def test_decide_rejects_an_effect_that_does_not_lower_its_own_residual():
+    nb = {"lc9.T": 1.0}
+    assert not claims.decide(nb, {"lc9.T": 0.99}, 10.0, 9.5, 500.0)[0]      # 5 % < 10 %
+    assert not claims.decide(nb, {"lc9.T": 0.99}, 10.0, 5.0, 4.0)[0]        # a drop noise gives
+    assert claims.decide(nb, {"lc9.T": 0.99}, 10.0, 5.0, 40.0)[0]
+
+
+# ---------------------------------------------------- what was possible ----
+def test_closed_share_and_achievable_arithmetic():
+    # nominal 1.0, refined 0.5, noise allows 0.3: closed 0.5 / 0.7
+    assert claims.closed_share(1.0, 0.5, 0.3) == pytest.approx(0.5 / 0.7)
+    assert claims.closed_share(1.0, 0.3, 0.3) == pytest.approx(1.0)
+    assert claims.closed_share(1.0, 1.1, 0.3) == pytest.approx(-0.1 / 0.7)
+    assert claims.closed_share(0.301, 0.3, 0.3) is None                    # no room to close
+    # two runs: variance 0.04 N^2 over 1000 samples and 0.09 over 3000; deviations 100 + 900
+    ach = claims.achievable_nrmse([0.04, 0.09], [1000, 3000], [100.0, 900.0])
+    assert ach == pytest.approx(math.sqrt((40.0 + 270.0) / 1000.0))
+    assert claims.achievable_nrmse(0.05, 1000, 48.0) == 1.0   # noise estimate above the data's variance
+
+
+def test_noise_floor_is_the_white_noise_under_lines_and_line_dynamics():
+    fs, n = 500.0, 30000
+    rng = np.random.default_rng(3)
+    t = np.arange(n) / fs
+    sigma = 0.3
+    y = 2.0 * np.sin(2 * np.pi * 1.0 * t) + 0.5 * np.sin(2 * np.pi * 17 * t) + rng.normal(0, sigma, n)
+    var, S, band = claims.noise_floor(y, fs, f_lo=40.0)
+    # the Welch median over ~1400 bins: a few % scatter
+    assert math.sqrt(var) == pytest.approx(sigma, rel=0.05)
+    assert S == pytest.approx(sigma ** 2 / (fs / 2), rel=0.1)
+
+
+def test_a_broadband_hump_is_a_finding_and_a_line_is_not():
+    from scipy import signal
+    fs, n = 250.0, 250 * 40
+    rng = np.random.default_rng(1)
+    t = np.arange(n) / fs
+    noise = rng.normal(0, 0.2, n)
+    # a lightly damped mode at 17 Hz driven by white noise: resonant 2nd-order filter
+    w0, z = 2 * np.pi * 17.0, 0.04
+    b, a = signal.bilinear([w0 ** 2], [1.0, 2 * z * w0, w0 ** 2], fs)
+    hump = signal.lfilter(b, a, rng.normal(0, 0.3, n))
+    line = 0.8 * np.sin(2 * np.pi * 9.0 * t)
+    d = _fake_diagnosis({"lc15.T": noise + hump + line}, fs, t, models={"lc15.T": np.zeros(n)})
+    d.steps = [{"sims": {"r": Sim(None, {"lc15.T": np.zeros(n)})}}]
+    d.where_report = {}
+    noise_est = claims.sensor_noise(d)
+    found = claims.humps(d, noise_est)
+    assert found, "the 17 Hz resonance is not reported"
+    assert abs(found[0]["frequency_hz"] - 17.0) <= 0.5   # 2 bins of 0.25 Hz
+    assert found[0]["text"].startswith(f"unexplained resonance near {found[0]['frequency_hz']:.3g} Hz on lc15")
+    assert all(abs(h["frequency_hz"] - 9.0) > 1.0 for h in found)          # the line is not a hump
+    # the line alone: nothing
+    d2 = _fake_diagnosis({"lc15.T": noise + line}, fs, t, models={"lc15.T": np.zeros(n)})
+    d2.steps = d.steps
+    d2.where_report = {}
+    assert claims.humps(d2, claims.sensor_noise(d2)) == []
+
+
+# ---------------------------------------------------- speed-scale rule ----
+def test_speed_governed_and_radius_set_elements_keep_kappa_zero():
+    assert not Diagnosis.kappa_allowed(Candidate("eccentricity", "sw_leader", "sw_leader", "DrivenRoller", 0.15))
+    assert not Diagnosis.kappa_allowed(Candidate("out_of_round", "unwind", "unwind", "UnwindRoll", 0.16))
+    assert Diagnosis.kappa_allowed(Candidate("eccentricity", "idler_u1", "idler_u1", "IdleRoller", 0.0381))
+
+
+def test_a_stretched_speed_master_line_cannot_take_an_idlers_line():
+    """Issue 9 (a): an idler's line at 4.244 Hz next to order 4 of the speed master
+    (1.052 Hz -> 4.208 Hz). The master's family may not be stretched 0.8 % onto the
+    idler's line; the idler's own family finds it with no stretch, and an idler's
+    stretch (a radius error) is one value for all runs, carried as a radius."""
+    fs, n = 100.0, 6000
+    t = np.arange(n) / fs
+    th_master = 2 * np.pi * 1.052 * t
+    th_idler = 2 * np.pi * 4.244 * t
+    y = 3.0 * np.sin(th_idler + 0.3) + np.random.default_rng(0).normal(0, 0.2, n)
+    d = _fake_diagnosis({"lc9.T": y}, fs, t, models={"lc9.T": np.zeros(n)})
+    master = Candidate("eccentricity", "sw_leader", "sw_leader", "DrivenRoller", 0.154, "sw_leader.theta")
+    idler = Candidate("eccentricity", "idler_u1", "idler_u1", "IdleRoller", 0.0381, "idler_u1.theta")
+    d.cands = [master, idler]
+    c = d.ctx[0]
+    c.theta = {master.key: th_master, idler.key: th_idler / 1.01}          # idler radius 1 % off
+    c.theta_src = {master.key: "model", idler.key: "model"}
+    c.freq = {master.key: 1.052, idler.key: 4.244 / 1.01}
+    c.fc = 0.3
+    c.periodic = {"lc9.T": y - np.mean(y)}
+    kap_master = d._refine_kappa_joint([c], master)
+    assert kap_master != 0.0     # unconstrained, the fit would stretch the master onto the idler's line ...
+    d.opt.max_effects = 1
+    d.which()                    # ... which() does not let it
+    assert c.kappa[master.key] == 0.0
+    assert c.kappa[idler.key] == pytest.approx(0.01, abs=0.002)
+    assert d.effects[0]["best"]["cand"] is idler
+    doc = d.with_effect(layout_edit.base_doc(EWL), idler, np.array([1e-4, 0, 0], complex))
+    R = float(doc["set"]["path.idler_u1.radius"].split()[0])
+    assert R == pytest.approx(0.0381 / (1 + c.kappa[idler.key]), rel=1e-6)
+    doc = d.with_effect(layout_edit.base_doc(EWL), master, np.array([1e-4, 0, 0], complex))
+    assert "path.sw_leader.radius" not in doc["set"]
+
+
+# ------------------------------------------------------ check in refine ----
+def test_refine_drops_an_effect_that_makes_a_sensor_worse(tmp_path):
+    """Two effects at one element's frequency: the first explains lc9, the second
+    also puts a line on lc15 that the data does not have (its NRMSE rises far
+    beyond 2 %). The refine stage keeps the first, takes the second out of the
+    layout and lists it in ``rejected`` with the NRMSE numbers."""
+    fs, n = 100.0, 3000
+    rng = np.random.default_rng(2)
+    t = np.arange(n) / fs
+    th = 2 * np.pi * 1.3 * t
+    th2 = 2 * np.pi * 3.1 * t
+    meas = {"lc9.T": 4.0 * np.sin(th) + rng.normal(0, 0.3, n), "lc15.T": 1.0 + rng.normal(0, 0.3, n)}
+    d = _fake_diagnosis(meas, fs, t, models={s: np.zeros(n) for s in meas})
+    good = Candidate("eccentricity", "idler_u1", "idler_u1", "IdleRoller", 0.0381, "idler_u1.theta")
+    bad = Candidate("eccentricity", "idler_p1", "idler_p1", "IdleRoller", 0.0381, "idler_p1.theta")
+    c = d.ctx[0]
+    c.theta = {good.key: th, bad.key: th2}
+    c.theta_src = {good.key: "model", bad.key: "model"}
+    c.freq = {good.key: 1.3, bad.key: 3.1}
+    c.kappa = {good.key: 0.0, bad.key: 0.0}
+    c.fc = 0.3
+
+    def simulate(doc):
+        s = doc.get("set", {})
+        y9, y15 = np.zeros(n), np.zeros(n)
+        if "path.idler_u1.eccentricity.C" in s:
+            y9 = y9 + 4.0 * np.sin(th)
+        if "path.idler_p1.eccentricity.C" in s:
+            y9 = y9 + 0.5 * np.sin(th2)               # a small line on lc9 (its "own" residual) ...
+            y15 = y15 + 1.5 * np.sin(th2)             # ... and a large one on lc15
+        return Sim(None, {"lc9.T": y9, "lc15.T": y15})
+
+    d.model = SimpleNamespace(copy_doc=lambda: layout_edit.base_doc(EWL),
+                              simulate_many=lambda jobs: [simulate(doc) for _, doc, _ in jobs])
+    d.final_effects = [{"ranked": [{"cand": good, "X": np.array([1e-4, 0, 0], complex)}]},
+                       {"ranked": [{"cand": bad, "X": np.array([2e-5, 0, 0], complex)}]}]
+    d.opt.polish = False
+    d.opt.structure = False
+    # the "bad" effect's own harmonics on lc9 are 0.5 N that the data lacks: make them
+    # present so the local criterion passes and only the NRMSE rule can drop it
+    d.ctx[0].meas["lc9.T"] = d.ctx[0].meas["lc9.T"] + 0.5 * np.sin(th2)
+    d.refine()
+    assert [fe["ranked"][0]["cand"].element for fe in d.final_effects] == ["idler_u1"]
+    assert [st["added"] for st in d.steps] == [None, "idler_u1"]
+    rej = [r for r in d.rejected if r["stage"] == "refine check"]
+    assert len(rej) == 1 and rej[0]["element"] == "idler_p1"
+    assert "lc15.T" in rej[0]["reason"]
+    assert rej[0]["nrmse_after"]["lc15.T"] > 1.02 * rej[0]["nrmse_before"]["lc15.T"]
+    assert rej[0]["nrmse_after"]["lc9.T"] < rej[0]["nrmse_before"]["lc9.T"]   # it did help lc9
+    assert "path.idler_p1.eccentricity.C" not in d.refined_doc["set"]
+
+
+# ------------------------------------------------------------- helpers ----
+def _fake_diagnosis(meas, fs, t, models):
+    d = Diagnosis(EWL, [], options=Options(harmonics=3, kappa_span=0.02))
+    run = SimpleNamespace(name="r", t=t, duration=float(t[-1] - t[0]), columns={}, overrides={})
+    c = RunCtx(run, True)
+    c.fs = fs
+    c.sensors = list(meas)
+    c.meas = dict(meas)
+    c.nominal = Sim(None, dict(models))
+    c.mask = t >= t[0] + 1.0
+    c.steady = np.ones_like(t, bool)
+    c.speed = np.ones_like(t)
+    c.fc = 0.3
+    for s in c.sensors:
+        c.resid[s] = c.meas[s] - models[s]
+        c.periodic[s] = est.split_slow_periodic(c.resid[s], fs, c.fc)[1]
+        c.floors[s] = est.NoiseFloor(c.periodic[s][c.mask], fs, median_hz=4.0)
+    d.ctx = [c]
+    d.cands = []
+    return d
+
+
+# ------------------------------------------------------- model form, end to end ----
+def test_form_feedforward_none_found_and_run_out_recovered(tmp_path, monkeypatch):
+    """Issue 9 (b), short: the line's speed loops feed forward no tension torque
+    (the layout's feed forward the measured tension) and the unwind is out of
+    round. In the layout's form the run-out estimate is far off and the pull and
+    rewind load cells keep the unwind's orders; the model-form screen must find
+    'feedforward none', recover the dominant order within 20 %, and leave no
+    sensor worse than the nominal model.
+
+    Model and 'line' are simulated by the monolithic reference solver (the
+    co-simulation's own accuracy is tested against it elsewhere): this test is
+    about the diagnosis, and keeps to a 20 s record at 250 Hz."""
+    import yaml
+    import webline.orchestrator.master as master
+    from webline.orchestrator.layout import load_system
+    from webline.orchestrator.reference import simulate_reference
+    from webline.diagnosis.pipeline import diagnose
+    from webline.diagnosis.runs import _experiment_overrides
+
+    C = [0.30e-3, 0.65e-3, 0.12e-3]
+    psi = [0.4, -1.0, 2.0]
+    loops = ("unwind", "sw_leader", "sw_follower", "pull_roll", "rewind")
+    tset = {f"drives.speed_loops.{e}.feedforward": False for e in loops}
+    tset["path.unwind.eccentricity"] = {"C": [f"{c * 1e3} mm" for c in C], "psi": [f"{p} rad" for p in psi]}
+    (tmp_path / "truth.yaml").write_text(yaml.safe_dump({"base": str(EWL), "set": tset}))
+    for name, speed, dur, seed in (("r1", "200 ft/min", "20 s", 11), ("h1", "170 ft/min", "12 s", 12)):
+        exp = {"duration": dur, "line_speed": speed}
+        system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp, "<run>", {}))
+        system.experiment.output_interval = 1.0 / 250.0
+        res = simulate_reference(system)
+        t = np.asarray(res.time)
+        rng = np.random.default_rng(seed)
+        cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc15", "lc19")}
+        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
+                   header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp}))
+
+    monkeypatch.setattr(master, "simulate", lambda system, fmu_paths=None, progress=False, **kw:
+                        simulate_reference(system))
+    rep = diagnose(EWL, [tmp_path / "r1.yaml"], holdout=[tmp_path / "h1.yaml"], out=tmp_path / "out",
+                   options=Options(fmu_paths={}, jobs=1, max_structures=2, harmonics=3))
+    eff = rep["effects"][0]
+    assert (eff["element"], eff["kind"]) == ("unwind", "out_of_round")
+    st = rep["structure"]
+    assert st["triggers"] and st["chosen"] == "feedforward none"
+    assert eff["model_form"] == "feedforward none"
+    amp2 = next(h["amplitude"] for h in eff["harmonics"] if h["order"] == 2)
+    unc = eff["amplitude_uncertainty"]
+    assert abs(amp2 - C[1]) < 0.2 * C[1] or not unc["identifiable"]
+    for s, g in rep["gap"].items():
+        assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], s
+        assert 0.0 < g["achievable"] < 1.0 and g["closed_share"] is not None
+    # held out (another speed, never fitted): the form and estimate carry over
+    for s, g in rep["holdout"]["out_of_sample"].items():
+        assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], s
+    g9 = rep["holdout"]["out_of_sample"]["lc9.T"]
+    assert g9["closed_share"] > 0.5
+    # the noise floor comes from the data: 0.3 N was added
+    for s, v in rep["noise_floor"]["r1"].items():
+        assert v["rms_N"] == pytest.approx(0.3, rel=0.1), s
+    assert "Model form: feedforward none" in rep["verdict"]
+    assert (tmp_path / "out" / "report.html").exists()
+    refined = yaml.safe_load((tmp_path / "out" / "refined_layout.yaml").read_text())
+    assert refined["set"]["drives.speed_loops.unwind.feedforward"] is False
