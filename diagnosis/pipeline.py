@@ -56,7 +56,7 @@ class Options:
     ambiguity: float = 0.85          # another family explaining this share of the best's energy is a tie
     kappa_span: float = 0.02         # speed-scale search range (+-)
     test_amplitude: float = 5e-5     # m, eccentricity of the sensitivity simulations
-    max_group: int = 4               # candidates simulated per ambiguous effect
+    max_group: int = 8               # candidates simulated per ambiguous effect (one fast-engine run each)
     polish: bool = True              # one Gauss-Newton pass from the refined simulation
     other_effects: bool = True       # screen non-periodic effects when a significant residual remains
     fmu_paths: dict = None
