@@ -75,8 +75,8 @@ def build(d):
     rep["findings"] = claims.humps(d, d.noise)
     rep["rejected"] = _rejected(d)
     rep["structure"] = getattr(d, "structure", None)
-    if getattr(d, "confirm", None) is not None:
-        rep["confirm"] = d.confirm   # absent: --no-confirm, or the diagnosis ran on the co-simulation
+    if getattr(d, "confirm_result", None) is not None:
+        rep["confirm"] = d.confirm_result   # absent: --no-confirm, or the diagnosis ran on the co-simulation
     rep["verdict"] = _verdict(rep)
     if rep.get("confirm"):
         c = rep["confirm"]
@@ -434,12 +434,15 @@ def _confirm_html(c):
     rows = "".join(
         f"<tr><td class=l>{e(r)}{' (held out)' if v['holdout'] else ''}</td><td class=l>{e(s)}</td>"
         f"<td>{_fmt(v['refined_fast'])}</td><td>{_fmt(v['refined_cosim'])}</td><td>{_fmt(v['difference'], 2)}</td>"
-        f"<td>{_fmt(v['allowed'], 2)}</td><td>{_fmt(v['tension_rel_rms'], 2)}</td></tr>"
+        f"<td>{_fmt(v['threshold'], 2)}</td><td>{_fmt(v['step_error_allows'], 2)}</td>"
+        f"<td>{_fmt(v['tension_rel_rms'], 2)}</td></tr>"
         for r, per in c["runs"].items() for s, v in per.items())
     return (f"<h2>Co-simulation check</h2><p>{e(c['text'])} (the refined layout run once through the FMU "
             f"co-simulation, {c['wall_s']:.1f} s).</p><table><tr><th>run</th><th>sensor</th>"
-            "<th>refined NRMSE, fast engine</th><th>co-simulation</th><th>difference</th><th>allowed</th>"
-            f"<th>tension rel. RMS difference</th></tr>{rows}</table>")
+            "<th>refined NRMSE, fast engine</th><th>co-simulation</th><th>difference</th><th>warning over</th>"
+            f"<th>co-sim step error allows</th><th>tension rel. RMS difference</th></tr>{rows}</table>"
+            f"<p>co-sim step error allows = {c['eps_cosim']:g} rms(T) / std(measured): the NRMSE shift the "
+            "co-simulation's own error at 2 ms (accuracy table) can cause.</p>")
 
 
 def html_report(d, rep):

@@ -3,6 +3,9 @@ the FMU co-simulation at the end and reports both engines' refined NRMSE.
 
 One short record (8 s at 250 Hz) of the test_diagnose line with a hidden
 eccentricity, made by the fast engine (cheap), plus noise; and a 5 s held-out record.
+The layout's co-simulation step is 1 ms: at 2 ms its step error (6e-4 of the
+tension, measured) is 15 % of this record's small fluctuation and the check
+rightly warns (docs/diagnose.md); at 1 ms it is 1.4e-4.
 """
 import json
 
@@ -35,7 +38,8 @@ def _record(folder, name, speed, seconds, seed):
 @pytest.fixture(scope="module")
 def case(tmp_path_factory, fmus):
     d = tmp_path_factory.mktemp("confirm")
-    (d / "line.yaml").write_text(LAYOUT)
+    assert "step: 2 ms" in LAYOUT
+    (d / "line.yaml").write_text(LAYOUT.replace("step: 2 ms", "step: 1 ms"))
     return d, _record(d, "fit", "200 ft/min", 8, 1), _record(d, "held", "150 ft/min", 5, 2)
 
 
@@ -46,6 +50,7 @@ def diagnose(args):
 
 def test_cosim_confirms_refined_gap(case, tmp_path):
     from webline.diagnosis.confirm import EPS_COSIM
+    from webline.diagnosis.runs import load_run
     d, fit, held = case
     out = tmp_path / "out"
     assert diagnose([d / "line.yaml", fit, "--out", out, "--holdout", held, "--no-structure"]) == 0
@@ -63,16 +68,20 @@ def test_cosim_confirms_refined_gap(case, tmp_path):
         # exact: |NRMSE(y, b) - NRMSE(y, a)| <= rms(b - a) / std(y)
         assert abs(v["difference"]) <= v["bound"] * (1 + 1e-9)
         # the two engines' tensions differ by no more than the co-simulation's error at 2 ms
-        # (accuracy table, worst load cell 2.2e-3; the fast engine is the reference to ~1e-6)
-        assert v["tension_rel_rms"] < EPS_COSIM
-        assert abs(v["difference"]) <= v["allowed"]
+        # (accuracy table, worst load cell 2.2e-3; the fast engine is the reference to ~1e-6),
+        # so the NRMSE by no more than EPS_COSIM rms(T) / std(y) (T ~ y: noise 0.05 N of 67 N)
+        assert v["tension_rel_rms"] < EPS_COSIM and v["within_step_error"]
+        y = load_run(fit if run == "fit" else held).columns["lc.T"]
+        assert abs(v["difference"]) <= EPS_COSIM * np.sqrt(np.mean(y ** 2)) / np.std(y)
+        # and below the warning threshold (5 % relative, 0.02 absolute)
+        assert abs(v["difference"]) <= max(0.02, 0.05 * v["refined_fast"]) and not v["exceeds_threshold"]
     assert c["agrees"] is True
     assert c["in_sample"]["lc.T"]["refined_cosim"] == pytest.approx(c["runs"]["fit"]["lc.T"]["refined_cosim"])
     assert "co-simulation confirms" in rep["verdict"].lower()
     assert "Co-simulation check" in (out / "report.html").read_text()
 
 
-def test_no_confirm_omits_it_and_a_failing_confirm_keeps_the_report(case, tmp_path, monkeypatch):
+def test_no_confirm_omits_it_failing_or_differing_confirm_noted(case, tmp_path, monkeypatch):
     d, fit, _ = case
     cheap = ["--no-structure", "--no-other", "--no-polish"]
     out = tmp_path / "off"
@@ -94,3 +103,18 @@ def test_no_confirm_omits_it_and_a_failing_confirm_keeps_the_report(case, tmp_pa
     assert rep2["effects"][0]["element"] == rep["effects"][0]["element"]      # the fast result stands
     assert rep2["gap"]["lc.T"]["refined"]["nrmse"] == pytest.approx(rep["gap"]["lc.T"]["refined"]["nrmse"])
     assert (out / "report.html").is_file() and (out / "refined_layout.yaml").is_file()
+
+    # an engine that disagrees beyond the co-simulation's step error: tension 1 % high
+    def off(self, run, doc=None, edits=(), label=""):
+        sim = self._simulate_fast(run, doc, edits, label)
+        sim.columns = {k: 1.01 * v for k, v in sim.columns.items()}
+        return sim
+    monkeypatch.setattr(LineModel, "confirm", off)
+    out = tmp_path / "differs"
+    assert diagnose([d / "line.yaml", fit, "--out", out, *cheap]) == 0
+    rep3 = json.loads((out / "report.json").read_text())
+    v = rep3["confirm"]["runs"]["fit"]["lc.T"]
+    assert v["tension_rel_rms"] == pytest.approx(0.01, rel=1e-9)
+    assert v["exceeds_threshold"] and not v["within_step_error"] and rep3["confirm"]["agrees"] is False
+    assert any(n.startswith("warning: run fit, lc.T") and "engines disagree" in n for n in rep3["notes"])
+    assert "co-simulation differs" in rep3["verdict"].lower()
