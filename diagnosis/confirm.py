@@ -151,8 +151,8 @@ def _text(ins, flagged):
     parts = []
     for s, v in (ins or {}).items():
         rel = v["relative_difference"]
-        parts.append(f"refined NRMSE {s.removesuffix('.T')} {v['refined_cosim']:.3g} (fast engine "
-                     f"{v['refined_fast']:.3g}), difference "
-                     + (f"{100 * abs(rel):.2g} %" if rel is not None else f"{v['difference']:.2g}"))
+        parts.append(f"refined NRMSE {s.removesuffix('.T')} {v['refined_cosim']:#.3g} (fast engine "
+                     f"{v['refined_fast']:#.3g}), difference "
+                     + (f"{100 * abs(rel):#.2g} %" if rel is not None else f"{v['difference']:.2g}"))
     head = ("co-simulation differs (see notes)" if flagged else "co-simulation confirms")
     return head + ": " + "; ".join(parts)
