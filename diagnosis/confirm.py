@@ -153,6 +153,16 @@ def _text(ins, flagged):
         rel = v["relative_difference"]
         parts.append(f"refined NRMSE {s.removesuffix('.T')} {v['refined_cosim']:#.3g} (fast engine "
                      f"{v['refined_fast']:#.3g}), difference "
-                     + (f"{100 * abs(rel):#.2g} %" if rel is not None else f"{v['difference']:.2g}"))
-    head = ("co-simulation differs (see notes)" if flagged else "co-simulation confirms")
+                     + (_pct(rel) if rel is not None else f"{v['difference']:.2g}"))
+    if not flagged:
+        head = "co-simulation confirms"
+    elif all(v["within_step_error"] for _, _, v in flagged):
+        head = "co-simulation differs, within its own step error (see notes)"
+    else:
+        head = "co-simulation differs beyond its step error (see notes)"
     return head + ": " + "; ".join(parts)
+
+
+def _pct(rel):
+    p = 100 * abs(rel)
+    return f"{p:.0f} %" if p >= 10 else f"{p:#.2g} %"
