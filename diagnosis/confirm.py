@@ -65,11 +65,10 @@ def run(d):
     from webline.diagnosis import metrics_ext as mx
     last = d.steps[-1]
     t0 = _time.perf_counter()
-    per_run, sims = {}, {}
+    per_run = {}
     try:
         for c in d.ctx:
             sim = d.model.confirm(c.run, d.refined_doc, label="confirm, co-simulation")
-            sims[c.name] = sim
             fast = last["sims"][c.name]
             per_run[c.name] = {}
             for s in c.sensors:
