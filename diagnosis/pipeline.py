@@ -26,7 +26,9 @@ Stages (each logged with its wall time):
    shaft compliance of each driven element, screened by simulation.
 7. **refine** - add the effects to the layout one by one
    (``refined_layout.yaml``), re-simulate every run, gap before/after.
-8. **report** - ``report.json`` and ``report.html``.
+8. **confirm** - the refined layout once through the FMU co-simulation (fast
+   engine only; ``Options.confirm``): refined NRMSE of both engines per run.
+9. **report** - ``report.json`` and ``report.html``.
 """
 import copy
 import logging
@@ -68,6 +70,7 @@ class Options:
     max_worse: float = 0.02          # an effect may raise no sensor's NRMSE (fit runs) by more than this share
     structure: bool = True           # screen model-form alternatives when an effect's check says so
     max_structures: int = 8          # structural alternatives simulated at most
+    confirm: bool = True             # fast engine: run the refined layout once through the co-simulation
 
 
 class DiagnoseError(ValueError):
@@ -133,6 +136,8 @@ class Diagnosis:
             if self.opt.other_effects:
                 self._stage("other effects", self.other_effects)
             self._stage("refine", self.refine)
+            if self.opt.confirm and self.model.engine == "fast":
+                self._stage("confirm", self.confirm)
         finally:
             if hasattr(self, "model"):
                 self.model.cleanup()
@@ -848,7 +853,13 @@ class Diagnosis:
                 Ms.append(m)
         return np.array(Ms) if Ms else None
 
-    # -------------------------------------------------------------- 8 report ----
+    # ------------------------------------------------------------- 8 confirm ----
+    def confirm(self):
+        """The refined layout once through the FMU co-simulation, every run (diagnosis.confirm)."""
+        from webline.diagnosis import confirm
+        confirm.run(self)
+
+    # -------------------------------------------------------------- 9 report ----
     def report(self):
         from webline.diagnosis import report as rep
         return rep.build(self)

@@ -75,7 +75,13 @@ def build(d):
     rep["findings"] = claims.humps(d, d.noise)
     rep["rejected"] = _rejected(d)
     rep["structure"] = getattr(d, "structure", None)
+    if getattr(d, "confirm_result", None) is not None:
+        rep["confirm"] = d.confirm_result   # absent: --no-confirm, or the diagnosis ran on the co-simulation
     rep["verdict"] = _verdict(rep)
+    if rep.get("confirm"):
+        c = rep["confirm"]
+        rep["verdict"] += (" " + c["text"][0].upper() + c["text"][1:] + "." if c["status"] == "done"
+                           else " The co-simulation check failed (see notes); the fast engine's result stands.")
     if d.out:
         out = Path(d.out)
         out.mkdir(parents=True, exist_ok=True)
@@ -420,6 +426,25 @@ def _fmt(v, nd=3):
     return html.escape(str(v))
 
 
+def _confirm_html(c):
+    e = html.escape
+    if c["status"] != "done":
+        return (f"<h2>Co-simulation check</h2><p>failed after {c['wall_s']:.1f} s: {e(str(c.get('error')))}; "
+                "the fast engine's result stands.</p>")
+    rows = "".join(
+        f"<tr><td class=l>{e(r)}{' (held out)' if v['holdout'] else ''}</td><td class=l>{e(s)}</td>"
+        f"<td>{_fmt(v['refined_fast'])}</td><td>{_fmt(v['refined_cosim'])}</td><td>{_fmt(v['difference'], 2)}</td>"
+        f"<td>{_fmt(v['threshold'], 2)}</td><td>{_fmt(v['step_error_allows'], 2)}</td>"
+        f"<td>{_fmt(v['tension_rel_rms'], 2)}</td></tr>"
+        for r, per in c["runs"].items() for s, v in per.items())
+    return (f"<h2>Co-simulation check</h2><p>{e(c['text'])} (the refined layout run once through the FMU "
+            f"co-simulation, {c['wall_s']:.1f} s).</p><table><tr><th>run</th><th>sensor</th>"
+            "<th>refined NRMSE, fast engine</th><th>co-simulation</th><th>difference</th><th>warning over</th>"
+            f"<th>co-sim step error allows</th><th>tension rel. RMS difference</th></tr>{rows}</table>"
+            f"<p>co-sim step error allows = {c['eps_cosim']:g} rms(T) / std(measured): the NRMSE shift the "
+            "co-simulation's own error at 2 ms (accuracy table) can cause.</p>")
+
+
 def html_report(d, rep):
     import matplotlib
     matplotlib.use("Agg")
@@ -436,6 +461,8 @@ def html_report(d, rep):
              f"<h1>webline diagnose</h1><p>Layout <code>{e(rep['layout'])}</code>; "
              f"runs: {e(', '.join(r['name'] + (' (held out)' if r['holdout'] else '') for r in rep['runs']))}</p>",
              f"<p><b>{e(rep['verdict'])}</b></p>"]
+    if rep.get("confirm"):
+        parts.append(_confirm_html(rep["confirm"]))
     # effects
     parts.append("<h2>Effects</h2>")
     if not rep["effects"]:
