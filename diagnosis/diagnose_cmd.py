@@ -40,6 +40,9 @@ def parser():
                     help="unit of the time column when the header gives none (e.g. ms); 'time_unit:' in a run file wins")
     ap.add_argument("--engine", choices=("fast", "cosim"), default="fast",
                     help="model runs: the compiled monolithic ODE (fast, default) or the FMU co-simulation")
+    ap.add_argument("--gains", choices=("simulation", "modes"), default="simulation",
+                    help="per-harmonic gains of a candidate: a sensitivity simulation each (default) or the "
+                         "linearised line (webline modes; docs/modes.md)")
     ap.add_argument("--quiet", action="store_true", help="only warnings")
     return ap
 
@@ -59,7 +62,8 @@ def main(argv=None):
                   structure=not args.no_structure, max_structures=args.max_structures,
                   progress=not args.quiet and sys.stderr.isatty(),
                   jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1),
-                  time_column=args.time, time_unit=args.time_unit, engine=args.engine)
+                  time_column=args.time, time_unit=args.time_unit, engine=args.engine,
+                  gains=args.gains)
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:
