@@ -1,8 +1,10 @@
 """The linearised line: Jacobian at the operating point, modes, transfer functions.
 
-``linearise(ode)`` differentiates the ODE of a line (``orchestrator.reference.ReferenceSystem``,
-or any object with the same interface: ``x0``, ``state_names``, ``columns``, ``models``,
-``names``, ``offsets``, ``u``, ``schedule``, ``stateful``) by central finite differences
+``linearise(ode, compiled=None)`` differentiates the ODE of a line
+(``orchestrator.reference.ReferenceSystem``, or any object with the same interface: ``x0``,
+``state_names``, ``columns``, ``models``, ``names``, ``offsets``, ``u``, ``schedule``,
+``stateful``; with ``compiled``, the fast engine's compiled code of the same system for A and
+C: ``linearise_system(system)`` does that by default) by central finite differences
 at its operating point (the start of the experiment, where the layout puts the line in
 equilibrium, ``orchestrator.operating_point``), giving
 
