@@ -547,11 +547,12 @@ class Diagnosis:
             ranked = []
             H, a0 = self.opt.harmonics, self.opt.test_amplitude
             jobs, keys = [], []
-            for d in eff["group"] if self.opt.gains != "modes" else ():  # "modes": no simulation
+            for d in eff["group"]:
                 k = d["cand"]
                 doc = self.with_effect(self.model.copy_doc(), k, np.full(H, a0, complex))
                 for c in fit:
-                    if self.orders_for(c, k.key):
+                    # gains = "modes": no simulation where the linearised line gives the gains
+                    if self.orders_for(c, k.key) and not self._use_modes(k, c):
                         jobs.append((c.run, doc, f"sensitivity {k.element}"))
                         keys.append((k.key, c.name))
             sens = dict(zip(keys, self.model.simulate_many(jobs))) if jobs else {}
@@ -652,7 +653,7 @@ class Diagnosis:
 
     def _gains_and_measured(self, k, eff, d, fit, sens):
         """Complex gains G[(run, sensor), order] from a sensitivity simulation (or, with
-        ``Options.gains == "modes"``, the linearised line: :meth:`_modes_gains`) and
+        ``Options.gains == "modes"``, the linearised line where :meth:`_use_modes`) and
         the measured harmonics M (same shape) of the residual the effect was found in."""
         H = self.opt.harmonics
         a0 = self.opt.test_amplitude
@@ -662,13 +663,8 @@ class Diagnosis:
             orders = self.orders_for(c, k.key)
             if not orders:
                 continue
-            lin_g = None
-            if self.opt.gains == "modes":
-                lin_g = self._modes_gains(k, c, orders)
-                if isinstance(lin_g, Exception):
-                    log.warning("  linearised gains of %s not available: %s", k.element, lin_g)
-                    return None, None, None
-            else:
+            lin_g = self._modes_gains(k, c, orders) if self._use_modes(k, c) else None
+            if lin_g is None:
                 sim = sens.get((k.key, c.name))
                 if sim is None or isinstance(sim, Exception):
                     log.warning("  sensitivity of %s not available: %s", k.element, sim)
@@ -694,6 +690,34 @@ class Diagnosis:
         if not Gs:
             return None, None, None
         return np.array(Gs), np.array(Ms), np.array(Ws)
+
+    # a fit window whose line speed spans more than this share of its mean has no one
+    # operating point: its gains come from the sensitivity simulation even with gains = "modes"
+    MODES_SPEED_SPREAD = 0.02
+
+    def _use_modes(self, k, c):
+        """Whether candidate ``k``'s gains in run ``c`` come from the linearised line:
+        ``Options.gains == "modes"``, a steady line speed over the fit samples (within
+        MODES_SPEED_SPREAD) and a line that linearises; else (logged once) the simulation."""
+        if self.opt.gains != "modes":
+            return False
+        memo = self.__dict__.setdefault("_modes_ok", {})
+        key = (k.key, c.name)
+        if key not in memo:
+            v = c.speed[c.mask]
+            why = ""
+            if not cand_mod.line_speed_column(c.nominal.system, c.nominal.columns):
+                why = "no line-speed column"
+            elif np.ptp(v) > self.MODES_SPEED_SPREAD * abs(float(np.mean(v))):
+                why = f"line speed {np.min(v):.3g}-{np.max(v):.3g} m/s over the fit window"
+            else:
+                g = self._modes_gains(k, c, self.orders_for(c, k.key))
+                if isinstance(g, Exception):
+                    why = f"not linearised: {g}"
+            memo[key] = not why
+            if why:
+                log.info("  gains of %s in run %s from a sensitivity simulation (%s)", k.element, c.name, why)
+        return memo[key]
 
     def _modes_gains(self, k, c, orders):
         """{sensor: complex gain per order} of candidate ``k``'s eccentricity in run ``c`` from

@@ -60,6 +60,13 @@ def test_modes_gains_match_the_sensitivity_simulation(tmp_path):
         assert fit[0].freq[cand.key] == pytest.approx(200 * 0.3048 / 60 / 1.5 / 0.0254 / (2 * math.pi), rel=1e-3)
         out[how] = _gains(d, cand, fit)
         sensors = fit[0].sensors
+        if how == "modes":
+            # the gains came from the linearisation: no sensitivity run
+            assert d._use_modes(cand, fit[0]) and d.model.n_sims == 1  # the nominal only
+            # a fit window over a speed ramp (3 %) has no one operating point: simulation
+            d._modes_ok.clear()
+            fit[0].speed = fit[0].speed * np.linspace(0.985, 1.015, fit[0].speed.size)
+            assert not d._use_modes(cand, fit[0])
     sim, lin = out["simulation"], out["modes"]
     assert sim.shape == lin.shape == (3, 3)
     # lc9, idler_u1's own zone (|G| 2e3 - 1.3e4 N/m): orders 1 (4.24 Hz) and 3 (12.7 Hz) lie between
