@@ -40,9 +40,9 @@ def parser():
                     help="unit of the time column when the header gives none (e.g. ms); 'time_unit:' in a run file wins")
     ap.add_argument("--engine", choices=("fast", "cosim"), default="fast",
                     help="model runs: the compiled monolithic ODE (fast, default) or the FMU co-simulation")
-    ap.add_argument("--gains", choices=("simulation", "modes"), default="simulation",
-                    help="per-harmonic gains of a candidate: a sensitivity simulation each (default) or the "
-                         "linearised line (webline modes; docs/modes.md)")
+    ap.add_argument("--gains", choices=("simulation", "modes"), default="modes",
+                    help="per-harmonic gains of a candidate: the linearised line (default; webline modes, "
+                         "docs/modes.md) or a sensitivity simulation each")
     ap.add_argument("--quiet", action="store_true", help="only warnings")
     return ap
 

@@ -68,9 +68,10 @@ class Options:
     max_worse: float = 0.02          # an effect may raise no sensor's NRMSE (fit runs) by more than this share
     structure: bool = True           # screen model-form alternatives when an effect's check says so
     max_structures: int = 8          # structural alternatives simulated at most
-    gains: str = "simulation"        # per-harmonic gains G(j omega) of a candidate: "simulation" (a
-    #                                  sensitivity run per candidate and fit run) or "modes" (the
-    #                                  linearised line, orchestrator.modes.harmonic_gains)
+    gains: str = "modes"             # per-harmonic gains G(j omega) of a candidate: "modes" (the
+    #                                  linearised line, orchestrator.modes.harmonic_gains; a fit window
+    #                                  over a speed ramp still simulates) or "simulation" (a
+    #                                  sensitivity run per candidate and fit run)
 
     def __post_init__(self):
         if self.gains not in ("simulation", "modes"):
