@@ -17,7 +17,8 @@ Stages (each logged with its wall time):
    Families that explain (nearly) the same residual are indistinguishable:
    all become candidates of one effect, ranked by how well each element's
    model-predicted pattern across the sensors (complex gain per harmonic from
-   a sensitivity simulation) fits the measured harmonics.
+   the linearised line, orchestrator.modes, or a sensitivity simulation:
+   ``Options.gains``) fits the measured harmonics.
 5. **estimate** - Fourier coefficients C_j, psi_j (m, rad) of the span-length
    change: measured harmonic / model complex gain, least squares over sensors
    and fit runs; one Gauss-Newton polish from the refined simulation.
