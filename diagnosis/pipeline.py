@@ -17,7 +17,8 @@ Stages (each logged with its wall time):
    Families that explain (nearly) the same residual are indistinguishable:
    all become candidates of one effect, ranked by how well each element's
    model-predicted pattern across the sensors (complex gain per harmonic from
-   a sensitivity simulation) fits the measured harmonics.
+   the linearised line, orchestrator.modes, or a sensitivity simulation:
+   ``Options.gains``) fits the measured harmonics.
 5. **estimate** - Fourier coefficients C_j, psi_j (m, rad) of the span-length
    change: measured harmonic / model complex gain, least squares over sensors
    and fit runs; one Gauss-Newton polish from the refined simulation.
@@ -71,6 +72,14 @@ class Options:
     structure: bool = True           # screen model-form alternatives when an effect's check says so
     max_structures: int = 8          # structural alternatives simulated at most
     confirm: bool = True             # fast engine: run the refined layout once through the co-simulation
+    gains: str = "modes"             # per-harmonic gains G(j omega) of a candidate: "modes" (the
+    #                                  linearised line, orchestrator.modes.harmonic_gains; a fit window
+    #                                  over a speed ramp still simulates) or "simulation" (a
+    #                                  sensitivity run per candidate and fit run)
+
+    def __post_init__(self):
+        if self.gains not in ("simulation", "modes"):
+            raise ValueError(f"Options.gains must be 'simulation' or 'modes' (got {self.gains!r})")
 
 
 class DiagnoseError(ValueError):
@@ -549,10 +558,11 @@ class Diagnosis:
                 k = d["cand"]
                 doc = self.with_effect(self.model.copy_doc(), k, np.full(H, a0, complex))
                 for c in fit:
-                    if self.orders_for(c, k.key):
+                    # gains = "modes": no simulation where the linearised line gives the gains
+                    if self.orders_for(c, k.key) and not self._use_modes(k, c):
                         jobs.append((c.run, doc, f"sensitivity {k.element}"))
                         keys.append((k.key, c.name))
-            sens = dict(zip(keys, self.model.simulate_many(jobs)))
+            sens = dict(zip(keys, self.model.simulate_many(jobs))) if jobs else {}
             for d in eff["group"]:
                 k = d["cand"]
                 G, M, W = self._gains_and_measured(k, eff, d, fit, sens)
@@ -649,7 +659,8 @@ class Diagnosis:
                  ", ".join(f"{r.get('verify', math.inf):.4g}" for r in tied))
 
     def _gains_and_measured(self, k, eff, d, fit, sens):
-        """Complex gains G[(run, sensor), order] from a sensitivity simulation and
+        """Complex gains G[(run, sensor), order] from a sensitivity simulation (or, with
+        ``Options.gains == "modes"``, the linearised line where :meth:`_use_modes`) and
         the measured harmonics M (same shape) of the residual the effect was found in."""
         H = self.opt.harmonics
         a0 = self.opt.test_amplitude
@@ -659,18 +670,23 @@ class Diagnosis:
             orders = self.orders_for(c, k.key)
             if not orders:
                 continue
-            sim = sens.get((k.key, c.name))
-            if sim is None or isinstance(sim, Exception):
-                log.warning("  sensitivity of %s not available: %s", k.element, sim)
-                return None, None, None
-            th_sim = sim.columns.get(k.theta, c.theta[k.key])
+            lin_g = self._modes_gains(k, c, orders) if self._use_modes(k, c) else None
+            if lin_g is None:
+                sim = sens.get((k.key, c.name))
+                if sim is None or isinstance(sim, Exception):
+                    log.warning("  sensitivity of %s not available: %s", k.element, sim)
+                    return None, None, None
+                th_sim = sim.columns.get(k.theta, c.theta[k.key])
             th_meas = self._theta_refined(c, k)
             resid = eff["resid_before"][c.name]
             for s in c.sensors:
-                delta = sim.columns[s] - c.nominal.columns[s]
-                delta = est.split_slow_periodic(delta, c.fs, c.fc)[1]
                 g = np.zeros(H, complex)
-                g_ord = est.complex_gain(delta, th_sim, orders, Xt[[j - 1 for j in orders]], c.mask)
+                if lin_g is not None:
+                    g_ord = lin_g[s]
+                else:
+                    delta = sim.columns[s] - c.nominal.columns[s]
+                    delta = est.split_slow_periodic(delta, c.fs, c.fc)[1]
+                    g_ord = est.complex_gain(delta, th_sim, orders, Xt[[j - 1 for j in orders]], c.mask)
                 m = np.zeros(H, complex)
                 m_ord = est.fit_harmonics(resid[s], th_meas, orders, c.mask)
                 for i, j in enumerate(orders):
@@ -681,6 +697,68 @@ class Diagnosis:
         if not Gs:
             return None, None, None
         return np.array(Gs), np.array(Ms), np.array(Ws)
+
+    # a fit window whose line speed spans more than this share of its mean has no one
+    # operating point: its gains come from the sensitivity simulation even with gains = "modes"
+    MODES_SPEED_SPREAD = 0.02
+
+    def _use_modes(self, k, c):
+        """Whether candidate ``k``'s gains in run ``c`` come from the linearised line:
+        ``Options.gains == "modes"``, a steady line speed over the fit samples (within
+        MODES_SPEED_SPREAD) and a line that linearises; else (logged once) the simulation."""
+        if self.opt.gains != "modes":
+            return False
+        memo = self.__dict__.setdefault("_modes_ok", {})
+        key = (k.key, c.name)
+        if key not in memo:
+            v = c.speed[c.mask]
+            why = ""
+            if not cand_mod.line_speed_column(c.nominal.system, c.nominal.columns):
+                why = "no line-speed column"
+            elif np.ptp(v) > self.MODES_SPEED_SPREAD * abs(float(np.mean(v))):
+                why = f"line speed {np.min(v):.3g}-{np.max(v):.3g} m/s over the fit window"
+            else:
+                g = self._modes_gains(k, c, self.orders_for(c, k.key))
+                if isinstance(g, Exception):
+                    why = f"not linearised: {g}"
+            memo[key] = not why
+            if why:
+                log.info("  gains of %s in run %s from a sensitivity simulation (%s)", k.element, c.name, why)
+        return memo[key]
+
+    def _modes_gains(self, k, c, orders):
+        """{sensor: complex gain per order} of candidate ``k``'s eccentricity in run ``c`` from
+        the linearised line (:func:`orchestrator.modes.harmonic_gains`, docs/modes.md) instead
+        of a sensitivity simulation: the layout under the run's conditions with the candidate's
+        speed-scaled radius (as the sensitivity run has it), linearised at the run's mean line
+        speed over the fit samples, at the harmonics f_j = j Omega/(2 pi) of the element's speed
+        there. Same convention as :func:`estimate.complex_gain` (Y_j = G_j X_j). The
+        linearisation is shared by the candidates of a run that need no radius change.
+        Returns an Exception if the line cannot be linearised."""
+        import dataclasses
+
+        from webline.orchestrator import modes as lin_mod
+        kap = self.kappa_of(k)
+        scaled = bool(kap and self.kappa_allowed(k))
+        cache = self.__dict__.setdefault("_modes_lin", {})
+        key = (c.name, k.element if scaled else None)
+        try:
+            if key not in cache:
+                doc = self.model.copy_doc()
+                if scaled:
+                    doc = self.with_effect(doc, k, np.full(self.opt.harmonics, self.opt.test_amplitude, complex))
+                overrides = dict(c.run.overrides)
+                if cand_mod.line_speed_column(c.nominal.system, c.nominal.columns):
+                    overrides["experiment.line_speed"] = f"{float(np.mean(c.speed[c.mask])):.12g} m/s"
+                system = self.model.system(dataclasses.replace(c.run, overrides=overrides), doc)
+                jac = "engine" if self.opt.engine == "fast" else "reference"
+                cache[key] = (system, lin_mod.linearise_system(system, jacobian=jac))
+            system, lin = cache[key]
+            f0 = float(system.meta["elements"][k.element]["f0"])
+            G = lin_mod.harmonic_gains(system, k.element, np.array(orders, float) * f0, lin=lin)
+        except Exception as exc:  # noqa: BLE001 - a candidate without gains is skipped, as a failed run is
+            return exc
+        return {s: G[s] for s in c.sensors}
 
     # ------------------------------------------------------- 6 other effects ----
     def other_effects(self):

@@ -1,8 +1,10 @@
 """The linearised line: Jacobian at the operating point, modes, transfer functions.
 
-``linearise(ode)`` differentiates the ODE of a line (``orchestrator.reference.ReferenceSystem``,
-or any object with the same interface: ``x0``, ``state_names``, ``columns``, ``models``,
-``names``, ``offsets``, ``u``, ``schedule``, ``stateful``) by central finite differences
+``linearise(ode, compiled=None)`` differentiates the ODE of a line
+(``orchestrator.reference.ReferenceSystem``, or any object with the same interface: ``x0``,
+``state_names``, ``columns``, ``models``, ``names``, ``offsets``, ``u``, ``schedule``,
+``stateful``; with ``compiled``, the fast engine's compiled code of the same system for A and
+C: ``linearise_system(system)`` does that by default) by central finite differences
 at its operating point (the start of the experiment, where the layout puts the line in
 equilibrium, ``orchestrator.operating_point``), giving
 
@@ -180,14 +182,26 @@ def _model_name(model):
     return type(model).__name__.replace("Model", "")
 
 
-def linearise(ode, t=None, rel_step=REL_STEP):
+def linearise(ode, t=None, rel_step=REL_STEP, compiled=None):
     """Central-difference linearisation of ``ode`` at its initial state ``ode.x0`` and time
     ``t`` (default the experiment start). Returns a :class:`Linearisation`.
 
+    ``compiled``: the fast engine's :class:`~orchestrator.engine.Compiled` of the same system
+    (``compiled.ref`` is then ``ode``): A and C are differenced on its generated code
+    (``rhs_numpy``/``outputs_numpy``, the right-hand side every fast-engine run integrates)
+    instead of the reference's Python models; the torque inputs (a connected input, no entry
+    of the engine's parameter vector) are differenced on ``ode`` either way.
     Span-length inputs are analytic partials of {20}; everything else is differenced.
     """
     t = float(ode.system.experiment.start if t is None else t)
     x0 = np.asarray(ode.x0, float)
+    if compiled is not None:
+        if list(compiled.state_names) != list(ode.state_names):
+            raise ValueError("linearise: the compiled system's states differ from the ODE's")
+        rhs = lambda x: compiled.rhs_numpy(t, x)  # noqa: E731
+        col_index = {c: i for i, c in enumerate(compiled.columns)}
+    else:
+        rhs = lambda x: _rhs(ode, t, x, {})  # noqa: E731
     kinds = _state_kind(ode)
     names = list(ode.state_names)
     # states frozen a priori: roll radii (quasi-static); angle candidates tested below
@@ -200,9 +214,9 @@ def linearise(ode, t=None, rel_step=REL_STEP):
         xp, xm = x0.copy(), x0.copy()
         xp[j] += h[j]
         xm[j] -= h[j]
-        cols[j] = (_rhs(ode, t, xp, {}) - _rhs(ode, t, xm, {})) / (2 * h[j])
+        cols[j] = (rhs(xp) - rhs(xm)) / (2 * h[j])
     # an angle is dropped when no other state's rate depends on it
-    f0 = _rhs(ode, t, x0, {})
+    f0 = rhs(x0)
     scale = np.maximum(1e-300, np.abs(np.column_stack([cols[j] for j in cand])).max())
     drop = set(frozen)
     for j in angles:
@@ -216,12 +230,17 @@ def linearise(ode, t=None, rel_step=REL_STEP):
     # outputs: load-cell readings
     loadcells = [c for c, m in zip(ode.names, ode.models) if _model_name(m) == "LoadCell"]
     outputs = [f"{n}.T" for n in loadcells]
+    if compiled is not None:
+        idx = [col_index[o] for o in outputs]
+        out = lambda x: compiled.outputs_numpy(t, x)[idx]  # noqa: E731
+    else:
+        out = lambda x: _outputs(ode, t, x, {}, outputs)  # noqa: E731
     C = np.zeros((len(outputs), len(keep)))
     for k, j in enumerate(keep):
         xp, xm = x0.copy(), x0.copy()
         xp[j] += h[j]
         xm[j] -= h[j]
-        C[:, k] = (_outputs(ode, t, xp, {}, outputs) - _outputs(ode, t, xm, {}, outputs)) / (2 * h[j])
+        C[:, k] = (out(xp) - out(xm)) / (2 * h[j])
 
     # the operating point's inputs (for the span partials)
     us, _ = _evaluate(ode, t, list(x0), {})
@@ -259,7 +278,7 @@ def linearise(ode, t=None, rel_step=REL_STEP):
         input_info.append({"kind": "torque", "element": name, "unit": "N.m"})
     stack = lambda cs, n: np.column_stack(cs) if cs else np.zeros((n, 0))  # noqa: E731
     info = {"state_kinds": [kinds[j] for j in keep], "inputs": input_info,
-            "span_weights": {}, "inertia": {}}
+            "span_weights": {}, "inertia": {}, "jacobian": "engine" if compiled is not None else "reference"}
     # energy weights: span L/EA, rotating J (the roll's J at the operating radius)
     _, ys = _evaluate(ode, t, list(x0), {})
     for ci, (name, model) in enumerate(zip(ode.names, ode.models)):
@@ -278,11 +297,34 @@ def linearise(ode, t=None, rel_step=REL_STEP):
                          residual=np.abs(f0[keep]), t=t, info=info)
 
 
-def linearise_system(system, t=None, rel_step=REL_STEP):
-    """:func:`linearise` of the round ``system`` (eccentricities removed: they are inputs)
-    through the monolithic reference ODE."""
+JACOBIANS = ("engine", "reference")
+
+
+def linearise_system(system, t=None, rel_step=REL_STEP, jacobian="engine"):
+    """:func:`linearise` of the round ``system`` (eccentricities removed: they are inputs).
+
+    ``jacobian="engine"``: A and C from the fast engine's compiled right-hand side
+    (:func:`orchestrator.engine.compile_system`); a layout the engine cannot compile
+    (:class:`~orchestrator.engine.EngineError`) or a missing numba falls back to the
+    reference. ``"reference"``: the monolithic reference ODE's Python models (the
+    cross-check). ``lin.info["jacobian"]`` says which was used."""
     from webline.orchestrator.reference import ReferenceSystem
-    return linearise(ReferenceSystem(round_system(system)), t=t, rel_step=rel_step)
+    if jacobian not in JACOBIANS:
+        raise ValueError(f"jacobian must be one of {', '.join(JACOBIANS)} (got {jacobian!r})")
+    rs = round_system(system)
+    if jacobian == "engine":
+        try:
+            from webline.orchestrator.engine import EngineError, compile_system
+        except ImportError:  # no numba
+            compile_system = None
+        if compile_system is not None:
+            try:
+                c = compile_system(rs)
+            except EngineError:
+                c = None
+            if c is not None:
+                return linearise(c.ref, t=t, rel_step=rel_step, compiled=c)
+    return linearise(ReferenceSystem(rs), t=t, rel_step=rel_step)
 
 
 # ---- modes -------------------------------------------------------------------------------

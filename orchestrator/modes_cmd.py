@@ -28,6 +28,9 @@ def parser():
     ap.add_argument("--fmax", type=float, default=None,
                     help="highest frequency, Hz (default: twice the fastest oscillatory mode, at least 10)")
     ap.add_argument("--points", type=int, default=800, help="frequencies on the log grid (default 800)")
+    ap.add_argument("--jacobian", choices=("engine", "reference"), default="engine",
+                    help="differentiate the fast engine's compiled right-hand side (default) or the "
+                         "monolithic reference's Python models (the cross-check); identical physics")
     return ap
 
 
@@ -77,7 +80,7 @@ def main(argv=None):
     if args.points < 2:
         print("webline modes: --points must be at least 2", file=sys.stderr)
         return 2
-    lin = M.linearise_system(system)
+    lin = M.linearise_system(system, jacobian=args.jacobian)
     mode_list = M.modes(lin)
     try:
         freqs = frequency_grid(mode_list, args.fmin, args.fmax, args.points)
@@ -174,7 +177,7 @@ def to_json(layout, system, lin, mode_list, freqs, tfs):
             for k, col in enumerate(lin.outputs)}}
     lam = np.linalg.eigvals(lin.A) if lin.A.size else np.zeros(0)
     return {
-        "layout": str(layout), "name": system.meta.get("name"), "t": lin.t,
+        "layout": str(layout), "name": system.meta.get("name"), "t": lin.t, "jacobian": lin.info.get("jacobian"),
         "states": lin.states, "frozen_states": lin.dropped,
         "residual_max": float(np.max(lin.residual)) if lin.residual.size else 0.0,
         "eigenvalues": [cx(z) for z in sorted(lam, key=lambda z: (abs(z.imag), z.real))],
