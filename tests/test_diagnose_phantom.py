@@ -73,3 +73,23 @@ def test_the_second_zone_line_is_the_form_not_a_source(case_result):
     # no sensor worse than the nominal model
     for s, g in rep["gap"].items():
         assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], s
+
+
+# ------------------------------------------------------------ the rule on numbers ----
+def test_parsimony_rule_on_numbers():
+    from webline.diagnosis.structure import parsimony_rule
+    # benchmark c01 (phantom): lc19 0.54 with both, 1.0 without in the layout's form, 0.584 in
+    # 'feedforward none' without: recovers (1 - 0.341) / (1 - 0.292) = 93 %; lc9 within 5 %
+    rows, why = parsimony_rule({"lc9.T": 0.263, "lc19.T": 0.540}, {"lc9.T": 0.265, "lc19.T": 0.999},
+                               {"lc9.T": 0.266, "lc19.T": 0.584})
+    assert why is None
+    assert rows["lc19.T"]["recovered"] == pytest.approx((0.999 ** 2 - 0.584 ** 2) / (0.999 ** 2 - 0.540 ** 2))
+    # own family c12 (two real sources): lc19 0.316 with both, 0.777 without in every form
+    rows, why = parsimony_rule({"lc19.T": 0.316}, {"lc19.T": 0.777}, {"lc19.T": 0.777})
+    assert why and rows["lc19.T"]["recovered"] == pytest.approx(0.0) and "lc19.T" in why
+    # recovering 70 % and 9 % above the full set: not about as good
+    f, w = 0.3, 0.8
+    p = (w ** 2 - 0.7 * (w ** 2 - f ** 2)) ** 0.5
+    assert parsimony_rule({"s": f}, {"s": w}, {"s": p})[1] is not None
+    p = (w ** 2 - 0.85 * (w ** 2 - f ** 2)) ** 0.5
+    assert parsimony_rule({"s": f}, {"s": w}, {"s": p})[1] is None
