@@ -357,6 +357,9 @@ def _verdict(rep):
     st = rep.get("structure") or {}
     if st.get("chosen") and st["chosen"] != "as modelled":
         extra += f" Model form: {st['chosen']}."
+    for r in rep.get("rejected") or []:
+        if r.get("stage") == "parsimony (structure screen)":
+            extra += f" Not a second source: {r['kind']} of {r['element']} ({r['reason'].split(':')[0]})."
     if not effs and st.get("chosen") and st["chosen"] != "as modelled":
         g = "; ".join(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}"
                       for s, v in rep["gap"].items() if v.get("nominal") and v.get("refined"))
