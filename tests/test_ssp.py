@@ -9,6 +9,7 @@ import pytest
 from webline.orchestrator.reference import simulate_reference
 from webline.orchestrator.ssp import export_ssp, read_ssp, simulate_libcosim
 from webline.orchestrator.system import Component, Connection, Experiment, System
+from ssp_bindings import full_parameter_set
 
 EA = 2.0e4
 
@@ -44,18 +45,9 @@ def test_read_back_is_the_same_system(two_span_ssp):
 
 def test_fmpy_validates_and_runs_it(two_span_ssp):
     from fmpy.ssp.simulation import simulate_ssp
-    from fmpy.ssp.ssd import Parameter, ParameterSet, read_ssd
-    ssd = read_ssd(str(two_span_ssp), validate=True)  # SSP 1.0 schema
-    assert [c.name for c in ssd.system.elements] == ["s1", "s2"]
     # fmpy's simulate_ssp applies only a parameter set it is given, with <component>.<name> names
-    ps = ParameterSet(name="bindings")
-    for c in ssd.system.elements:
-        for b in c.parameterBindings:
-            for s in b.parameterValues:
-                for p in s.parameters:
-                    q = Parameter(name=f"{c.name}.{p.name}")
-                    q.type, q.value = p.type, p.value
-                    ps.parameters.append(q)
+    ssd, ps = full_parameter_set(two_span_ssp, validate=True)  # SSP 1.0 schema
+    assert [c.name for c in ssd.system.elements] == ["s1", "s2"]
     r = simulate_ssp(str(two_span_ssp), stop_time=0.2, step_size=1e-3, parameter_set=ps)
     ref = simulate_reference(two_spans(stop=0.2), t_eval=r["time"] + 1e-3)  # fmpy labels rows by step start
     assert np.allclose(r["s1.T"], ref["s1.T"], rtol=1e-6)

@@ -12,6 +12,7 @@ import pytest
 from webline.orchestrator.layout import load_system
 from webline.orchestrator.master import simulate as webline_simulate
 from webline.orchestrator.ssp import export_ssp
+from ssp_bindings import full_parameter_set
 
 ROOT = Path(__file__).resolve().parent.parent
 EWL = ROOT / "scenarios" / "ewl.yaml"
@@ -33,19 +34,6 @@ def ewl_ssp(tmp_path_factory):
     return s, export_ssp(s, tmp_path_factory.mktemp("ewl") / "ewl.ssp", parameter_files=True)
 
 
-def _full_parameter_set(ssp):
-    """Every binding of the SSD as ``<component>.<name>``: what simulate_ssp's parameter_set expects."""
-    from fmpy.ssp.ssd import Parameter, ParameterSet, read_ssd
-    ssd = read_ssd(str(ssp))
-    ps = ParameterSet(name="bindings")
-    for c in ssd.system.elements:
-        for b in c.parameterBindings:
-            for s in b.parameterValues:
-                for p in s.parameters:
-                    q = Parameter(name=f"{c.name}.{p.name}")
-                    q.type, q.value = p.type, p.value
-                    ps.parameters.append(q)
-    return ssd, ps
 
 
 def test_fmpy_simulate_ssp_applies_parameters_by_bare_name_prefix(ewl_ssp):
@@ -53,7 +41,7 @@ def test_fmpy_simulate_ssp_applies_parameters_by_bare_name_prefix(ewl_ssp):
     with ``a``, without the dot: ``unwind`` also receives ``unwind_v_ref.n`` and looks up a
     variable ``v_ref.n``. The EWL has 17 such name pairs (unwind/unwind_speed_pi, span1/span10, ...)."""
     from fmpy.ssp.simulation import simulate_ssp
-    ssd, ps = _full_parameter_set(ewl_ssp[1])
+    ssd, ps = full_parameter_set(ewl_ssp[1])
     names = [c.name for c in ssd.system.elements]
     pairs = [(a, b) for a in names for b in names if a != b and b.startswith(a)]
     assert ("unwind", "unwind_speed_pi") in pairs and ("span1", "span10") in pairs
@@ -90,7 +78,7 @@ def test_fmpy_simulate_ssp_starts_every_connected_input_at_zero(ewl_ssp, step, m
 
     monkeypatch.setattr(S, "set_parameters", set_parameters)
     monkeypatch.setattr(S, "do_step", recording_do_step)
-    ssd, ps = _full_parameter_set(ewl_ssp[1])
+    ssd, ps = full_parameter_set(ewl_ssp[1])
     with pytest.raises(FMICallException) as exc:
         S.simulate_ssp(str(ewl_ssp[1]), stop_time=0.01, step_size=step, parameter_set=ps)
     assert exc.value.function == "fmi2DoStep" and exc.value.status == 2  # discard
