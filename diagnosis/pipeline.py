@@ -423,12 +423,13 @@ class Diagnosis:
                 kap = self._refine_kappa_joint(fit, k)
             for c in self.ctx:
                 c.kappa[k.key] = kap
-            if self.kappa_per_run(k) and self.opt.kappa_span > 0 \
-                    and all(c.theta_src[k.key] == "model" for c in self.ctx):
+            if self.kappa_per_run(k) and self.opt.kappa_span > 0:
                 # a roll's start radius is a run condition: each run its own speed scale,
-                # from that run's own data on the roll's lines (held-out runs too)
+                # from that run's own data on the roll's lines (held-out runs too); a run
+                # whose data carry the roll's angle or pulses keeps that angle
                 for c in self.ctx:
-                    c.kappa[k.key] = self._refine_kappa_joint([c], k)
+                    if c.theta_src[k.key] == "model":
+                        c.kappa[k.key] = self._refine_kappa_joint([c], k)
         resid = {c.name: {s: c.periodic[s].copy() for s in c.sensors} for c in fit}
         total = sum(float(np.sum(c.periodic[s][c.mask] ** 2)) for c in fit for s in c.sensors)
         self.total_periodic = total
