@@ -106,6 +106,7 @@ class RunCtx:
     theta_src: dict = field(default_factory=dict)  # candidate key -> "model" / "data angle" / "data pulse"
     freq: dict = field(default_factory=dict)       # candidate key -> mean fundamental (Hz) over mask
     kappa: dict = field(default_factory=dict)
+    radius0: dict = field(default_factory=dict)    # component -> start radius (m) under the run's conditions
 
     @property
     def name(self):
@@ -199,6 +200,9 @@ class Diagnosis:
                     raise DiagnoseError(f"{p}: experiment.duration: {exc}") from None
                 ctx = RunCtx(run, fit)
                 ctx.fs = run.fs
+                for comp in system.components:
+                    pp = comp.parameters
+                    ctx.radius0[comp.name] = float(pp.get("R", pp.get("R0", 0.0)) or 0.0)
                 ctx.sensors = self._match_sensors(system, run, p)
                 ctx.meas = {s: run.columns[self._data_col[(run.name, s)]] for s in ctx.sensors}
                 self.ctx.append(ctx)
@@ -419,6 +423,13 @@ class Diagnosis:
                 kap = self._refine_kappa_joint(fit, k)
             for c in self.ctx:
                 c.kappa[k.key] = kap
+            if self.kappa_per_run(k) and self.opt.kappa_span > 0:
+                # a roll's start radius is a run condition: each run its own speed scale,
+                # from that run's own data on the roll's lines (held-out runs too); a run
+                # whose data carry the roll's angle or pulses keeps that angle
+                for c in self.ctx:
+                    if c.theta_src[k.key] == "model":
+                        c.kappa[k.key] = self._refine_kappa_joint([c], k)
         resid = {c.name: {s: c.periodic[s].copy() for s in c.sensors} for c in fit}
         total = sum(float(np.sum(c.periodic[s][c.mask] ** 2)) for c in fit for s in c.sensors)
         self.total_periodic = total
@@ -479,6 +490,7 @@ class Diagnosis:
                     resid[c.name][s] = resid[c.name][s] - est.harmonic_signal(th, ff["Y"][s], ff["orders"])
             remaining = [k for k in remaining if all(k is not d["cand"] for d in group)]
         self.resid_after_periodic = resid
+        self._correct_run_conditions()
         if not self.effects:
             log.info("  no significant periodic family: the periodic residual is noise")
 
@@ -490,9 +502,97 @@ class Diagnosis:
         and an unwind's or rewind's radius is set by each run."""
         return k.model == "IdleRoller" and k.radius > 0
 
-    def _refine_kappa_joint(self, fit, k):
+    @staticmethod
+    def kappa_per_run(k):
+        """A speed scale the refined run conditions carry, one per run: an unwind's
+        or rewind's start radius (``experiment.roll_radius.<roll>``), which each run
+        sets and which can be off by a few per cent (issue 9 item 2)."""
+        return k.model in ("UnwindRoll", "RewindRoll")
+
+    def _correct_run_conditions(self):
+        """Carry the per-run speed scales of the rolls found (or tied) in a periodic
+        family as start-radius corrections of each run (theta_true = (1 + kappa)
+        theta_model = v t / R_true, so R_true = R_run / (1 + kappa)): the override goes
+        into the run's own overrides, so every later simulation of the run (gains,
+        refine, polish, structure, confirm, held-out runs) uses it. The roll's angle
+        is then taken from the nominal model re-simulated under the corrected run
+        conditions (no scaled approximation left)."""
+        self.run_corrections = {}
+        rolls = []
+        for eff in self.effects:
+            for d in eff["group"]:
+                k = d["cand"]
+                if self.kappa_per_run(k) and k not in rolls and any(c.kappa.get(k.key, 0.0) for c in self.ctx):
+                    rolls.append(k)
+        if not rolls:
+            return
+        import dataclasses
+        changed = []
+        for c in self.ctx:
+            ov = dict(c.run.overrides)
+            for k in rolls:
+                kap = float(c.kappa.get(k.key, 0.0))
+                if not kap:
+                    continue
+                R = c.radius0.get(k.component, 0.0)
+                if R <= 0:
+                    continue
+                key = f"experiment.roll_radius.{k.element}"
+                Rt = R / (1.0 + kap)
+                ov[key] = f"{Rt:.9g} m"
+                self.run_corrections.setdefault(c.name, {})[key] = f"{Rt:.6g} m"
+                self.run_corrections[c.name].setdefault("kappa", {})[k.element] = kap
+                self.run_corrections[c.name].setdefault("radius_in_run_m", {})[k.element] = R
+                self.run_corrections[c.name].setdefault("from", "fit run" if c.fit else
+                                                        "held-out run: its own data on the roll's lines only")
+            if ov != c.run.overrides:
+                c.run = dataclasses.replace(c.run, overrides=ov)
+                changed.append(c)
+        if not changed:
+            return
+        # the search scales the model's angle linearly, while the roll's radius shrinks
+        # as it turns (a start-radius change is not quite a uniform speed scale): a few
+        # passes of (simulate with the corrected radius, search a small residual scale)
+        todo = {(c.name, k.key): k for c in changed for k in rolls if c.kappa.get(k.key, 0.0)}
+        for it in range(4):
+            sims = self.model.simulate_many([(c.run, None, "nominal, run conditions refined") for c in changed])
+            more = []
+            for c, sim in zip(changed, sims):
+                if isinstance(sim, Exception):
+                    raise SimulationFailed(f"run {c.name} (nominal, run conditions refined): {sim}")
+                ov = dict(c.run.overrides)
+                for k in rolls:
+                    if (c.name, k.key) not in todo or k.theta not in sim.columns:
+                        continue
+                    c.theta[k.key] = sim.columns[k.theta]
+                    c.freq[k.key] = self._mean_freq(c, c.theta[k.key])
+                    c.kappa[k.key] = 0.0
+                    if it == 3:
+                        continue
+                    dk = self._refine_kappa_joint([c], k, span=0.25 * self.opt.kappa_span, strict=False)
+                    if abs(dk) < 1e-4:
+                        continue
+                    key = f"experiment.roll_radius.{k.element}"
+                    corr = self.run_corrections[c.name]
+                    Rt = float(ov[key].split()[0]) / (1.0 + dk)
+                    ov[key] = f"{Rt:.9g} m"
+                    corr[key] = f"{Rt:.6g} m"
+                    corr["kappa"][k.element] = corr["radius_in_run_m"][k.element] / Rt - 1.0
+                    if c not in more:
+                        more.append(c)
+                if ov != c.run.overrides:
+                    c.run = dataclasses.replace(c.run, overrides=ov)
+            if not more:
+                break
+        for name, corr in self.run_corrections.items():
+            log.info("  run %s: %s", name, ", ".join(f"{a} = {b}" for a, b in corr.items()
+                                                     if a.startswith("experiment.")))
+
+    def _refine_kappa_joint(self, fit, k, span=None, strict=True):
         """One speed scale of family k over all fit runs (a radius is the same in
-        every run); 0 unless clearly better. On decimated signals."""
+        every run); 0 unless clearly better (``strict``; else the best scale within
+        +-``span``, default ``Options.kappa_span``). On decimated signals."""
+        span = self.opt.kappa_span if span is None else span
         parts = []
         hmax, revs_min = 1, math.inf
         for c in fit:
@@ -513,8 +613,8 @@ class Diagnosis:
             return 0.0
         revs = max(revs_min, max(abs(p[1][-1] - p[1][0]) / (2 * math.pi) for p in parts))
         step = 0.25 / (hmax * revs)
-        n = int(min(200, math.ceil(self.opt.kappa_span / step)))
-        grid = np.linspace(-self.opt.kappa_span, self.opt.kappa_span, 2 * n + 1)
+        n = int(min(200, max(3, math.ceil(span / step))))
+        grid = np.linspace(-span, span, 2 * n + 1)
 
         def energy(kap):
             tot = 0.0
@@ -532,6 +632,8 @@ class Diagnosis:
             den = a - 2 * b + cc
             if den < 0:
                 kap += 0.5 * (a - cc) / den * (grid[1] - grid[0])
+        if not strict:
+            return kap if energy(kap) > e0 else 0.0
         # keep the model's angle unless the refined one explains clearly more
         if energy(kap) < 1.2 * e0 + 1e-30 or abs(kap) < 0.5 / (hmax * revs):
             return 0.0

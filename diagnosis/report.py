@@ -20,6 +20,9 @@ def build(d):
         "runs": [{"name": c.name, "file": str(c.run.path), "data": str(c.run.data_path),
                   "holdout": not c.fit, "duration_s": c.run.duration, "fs_hz": c.fs,
                   "sensors": c.sensors, "conditions": c.run.overrides} for c in d.ctx],
+        # a roll's start radius re-estimated per run (issue 9 item 2): the corrected
+        # run condition every simulation of that run used
+        "run_corrections": getattr(d, "run_corrections", {}),
         "effects": _effects(d),
         "gap": {},
         "holdout": {},
