@@ -74,45 +74,9 @@ def _jit(fn, **deps):
     return numba.njit(cache=False)(fn)
 
 
-def _profile_value_array(ts, ys, t):
-    """:func:`webline.physics.profile.profile_value` on arrays (numba has no ``bisect``;
-    ``searchsorted(side="right")`` is ``bisect_right``)."""
-    k = np.searchsorted(ts, t + TIME_TOLERANCE, side="right") - 1
-    if k < 0:
-        return ys[0]
-    if k >= len(ts) - 1:
-        return ys[len(ts) - 1]
-    t0, t1 = ts[k], ts[k + 1]
-    f = min(max((t - t0) / (t1 - t0), 0.0), 1.0)
-    return ys[k] + f * (ys[k + 1] - ys[k])
-
-
-def _profile_slope_array(ts, ys, t):
-    """``profile_slope`` (the speed profile's output dy) on arrays, as ``profile_value``."""
-    k = np.searchsorted(ts, t + TIME_TOLERANCE, side="right") - 1
-    if k < 0 or k >= len(ts) - 1:
-        return 0.0
-    dt = ts[k + 1] - ts[k]
-    if not dt > 0.0:
-        return 0.0
-    return (ys[k + 1] - ys[k]) / dt
-
-
-# model-form functions that may not exist yet in webline.physics (FORMS.md); same formulas
-def _acceleration_feedforward(J, a_ref, R):
-    return J * a_ref / R
-
-
-def _current_lag_rate(tau_m, tau_cmd, tau_current):
-    return (tau_cmd - tau_m) / tau_current
-
-
-def _second_order_filter_rates(y, dy, u, w_c, zeta):
-    return dy, w_c * w_c * (u - y) - 2.0 * zeta * w_c * dy
-
-
-def _kelvin_voigt_tension(T_e, dT_e_dt, damping_time):
-    return T_e + damping_time * dT_e_dt
+def _bisect_right(a, x):
+    """``bisect.bisect_right`` for the profile functions: numba has no ``bisect``."""
+    return np.searchsorted(a, x, side="right")
 
 
 def _splitmix64(z):
@@ -133,26 +97,20 @@ def _standard_normal(seed, t):
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
-def _physics_or(module, name, fallback):
-    return getattr(module, name, fallback)
-
-
-TIME_TOLERANCE = None
 NOISE_TIME_RESOLUTION = None
 
 
 def nb():
     """Namespace of the compiled physics functions (built once)."""
-    global _NB, TIME_TOLERANCE, NOISE_TIME_RESOLUTION
+    global _NB, NOISE_TIME_RESOLUTION
     if _NB is not None:
         return _NB
     from webline.physics import (controllers, drive, eccentricity, load_cell, material_roll, profile,
                                  roller, span)
-    TIME_TOLERANCE = profile.TIME_TOLERANCE
     NOISE_TIME_RESOLUTION = load_cell.NOISE_TIME_RESOLUTION
     f = {}
     f["tension_rate"] = _jit(span.tension_rate)
-    f["kelvin_voigt_tension"] = _jit(_physics_or(span, "kelvin_voigt_tension", _kelvin_voigt_tension))
+    f["kelvin_voigt_tension"] = _jit(span.kelvin_voigt_tension)
     f["length_offset"] = _jit(eccentricity.length_offset)
     f["length_rate"] = _jit(eccentricity.length_rate)
     f["roller_acceleration"] = _jit(roller.roller_acceleration)
@@ -166,15 +124,14 @@ def nb():
     f["motor_acceleration"] = _jit(drive.motor_acceleration)
     f["pi_output"] = _jit(controllers.pi_output)
     f["integral_rate"] = _jit(controllers.integral_rate)
-    f["acceleration_feedforward"] = _jit(_physics_or(controllers, "acceleration_feedforward",
-                                                     _acceleration_feedforward))
-    f["current_lag_rate"] = _jit(_physics_or(controllers, "current_lag_rate", _current_lag_rate))
+    f["acceleration_feedforward"] = _jit(controllers.acceleration_feedforward)
+    f["current_lag_rate"] = _jit(controllers.current_lag_rate)
     f["measured_tension"] = _jit(load_cell.measured_tension)
     f["first_order_filter_rate"] = _jit(load_cell.first_order_filter_rate)
-    f["second_order_filter_rates"] = _jit(_physics_or(load_cell, "second_order_filter_rates",
-                                                      _second_order_filter_rates))
-    f["profile_value"] = _jit(_profile_value_array, TIME_TOLERANCE=TIME_TOLERANCE)
-    f["profile_slope"] = _jit(_profile_slope_array, TIME_TOLERANCE=TIME_TOLERANCE)
+    f["second_order_filter_rates"] = _jit(load_cell.second_order_filter_rates)
+    bisect_right = _jit(_bisect_right)
+    f["profile_value"] = _jit(profile.profile_value, bisect_right=bisect_right)
+    f["profile_slope"] = _jit(profile.profile_slope, bisect_right=bisect_right)
     sm = _jit(_splitmix64)
     f["standard_normal"] = _jit(_standard_normal, _splitmix64=sm, NOISE_TIME_RESOLUTION=NOISE_TIME_RESOLUTION)
     _NB = f

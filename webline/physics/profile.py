@@ -6,7 +6,7 @@ same time make a step, and at the step time the output already has the new
 value (right-continuous, so a master sampling there feeds the new value to
 the whole following step).
 """
-import bisect
+from bisect import bisect_right
 
 from webline.physics.element import ElementModel, require_finite
 
@@ -19,7 +19,7 @@ TIME_TOLERANCE = 1.0e-9
 
 def profile_value(ts, ys, t):
     """y(t) of the table (ts, ys); ``ts`` non-decreasing."""
-    k = bisect.bisect_right(ts, t + TIME_TOLERANCE) - 1
+    k = bisect_right(ts, t + TIME_TOLERANCE) - 1
     if k < 0:
         return ys[0]
     if k >= len(ts) - 1:
@@ -33,7 +33,7 @@ def profile_slope(ts, ys, t):
     """dy/dt of the table at t: the slope of the segment that holds t (right-continuous, like
     :func:`profile_value`); 0 before the first point, after the last and on a step (two
     points at the same time: the jump itself has no finite slope)."""
-    k = bisect.bisect_right(ts, t + TIME_TOLERANCE) - 1
+    k = bisect_right(ts, t + TIME_TOLERANCE) - 1
     if k < 0 or k >= len(ts) - 1:
         return 0.0
     dt = ts[k + 1] - ts[k]
