@@ -72,6 +72,9 @@ class Options:
     structure: bool = True           # screen model-form alternatives when an effect's check says so
     max_structures: int = 8          # structural alternatives simulated at most
     confirm: bool = True             # fast engine: run the refined layout once through the co-simulation
+    estimator: str = "time"          # Fourier coefficients: "time" (data regressed on simulated
+    #                                  responses, diagnosis.regress; ramps and speed-dependent gains
+    #                                  included) or "harmonic" (measured harmonic / complex gain)
     gains: str = "modes"             # per-harmonic gains G(j omega) of a candidate: "modes" (the
     #                                  linearised line, orchestrator.modes.harmonic_gains; a fit window
     #                                  over a speed ramp still simulates) or "simulation" (a
@@ -80,6 +83,8 @@ class Options:
     def __post_init__(self):
         if self.gains not in ("simulation", "modes"):
             raise ValueError(f"Options.gains must be 'simulation' or 'modes' (got {self.gains!r})")
+        if self.estimator not in ("time", "harmonic"):
+            raise ValueError(f"Options.estimator must be 'time' or 'harmonic' (got {self.estimator!r})")
 
 
 class DiagnoseError(ValueError):
@@ -393,20 +398,33 @@ class Diagnosis:
         the fit window gives phasors Y_k; per order |sum Y_k|^2 / (K sum |Y_k|^2)
         is 1 for a steady harmonic (its amplitude may change, its phase not) and
         about 1/K for noise or a transient the family merely projects onto.
-        Averaged over orders and sensors with the fitted energies as weights."""
-        idx = np.flatnonzero(c.mask)
-        revs = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi) if len(idx) > 1 else 0.0
-        K = int(min(4, revs // 1.5))
-        if K < 2:
+        Averaged over orders and sensors with the fitted energies as weights.
+
+        Segments never straddle two steady windows of the fit: at another line
+        speed an order sits elsewhere on the line's frequency response, and its
+        phase there differs for a real source as much as for noise."""
+        idx_all = np.flatnonzero(c.mask)
+        if len(idx_all) < 2:
             return 1.0
-        segs = np.array_split(idx, K)
+        # contiguous pieces of the fit mask: one per steady window (the whole window if no ramp)
+        cuts = np.flatnonzero(np.diff(idx_all) > 1) + 1
+        pieces = [p for p in np.split(idx_all, cuts) if len(p) > 1]
         num = den = 0.0
-        for s in c.sensors:
-            Ys = np.array([est.fit_harmonics(resid[s][g], th[g], orders) for g in segs])
-            w = np.abs(fit["Y"][s]) ** 2
-            coh = np.abs(Ys.sum(axis=0)) ** 2 / (K * np.maximum(np.sum(np.abs(Ys) ** 2, axis=0), 1e-300))
-            num += float(np.sum(w * coh))
-            den += float(np.sum(w))
+        for idx in pieces:
+            revs = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi)
+            K = int(min(4, revs // 1.5))
+            if K < 2:
+                continue
+            segs = np.array_split(idx, K)
+            share = len(idx) / len(idx_all)
+            for s in c.sensors:
+                Ys = np.array([est.fit_harmonics(resid[s][g], th[g], orders) for g in segs])
+                w = np.abs(fit["Y"][s]) ** 2 * share
+                coh = np.abs(Ys.sum(axis=0)) ** 2 / (K * np.maximum(np.sum(np.abs(Ys) ** 2, axis=0), 1e-300))
+                num += float(np.sum(w * coh))
+                den += float(np.sum(w))
+        if den == 0.0:
+            return 1.0
         return num / den if den > 0 else 0.0
 
     def which(self):
@@ -685,12 +703,51 @@ class Diagnosis:
             # explain the same energy; the one that needs less is the likelier)
             ranked.sort(key=lambda r: (round(r["misfit"], 2), r["score"]["lowest_order"],
                                        float(np.linalg.norm(r["X"]))))
-            self._verify_ties(ranked, fit)
-            self.final_effects.append({"ranked": ranked, "eff": eff})
-            self._split_same_frequency(ranked, eff, fit)
+            if self.opt.estimator == "time" and self._select_time_domain(ranked, eff, fit):
+                pass
+            else:
+                self._verify_ties(ranked, fit)
+                self.final_effects.append({"ranked": ranked, "eff": eff})
+                self._split_same_frequency(ranked, eff, fit)
             b = ranked[0]
             log.info("  %s: C = %s um, misfit %.3f", b["cand"].element,
                      ", ".join(f"{1e6 * abs(x):.1f}" for x in b["X"]), b["misfit"])
+
+    def _select_time_domain(self, ranked, eff, fit):
+        """Rank the effect's candidates by the residual each one's time-domain fit leaves
+        (:func:`diagnosis.regress.select`), take its coefficients, and add a second
+        same-frequency source where the regression says so. False if a simulation failed
+        (the harmonic ranking stands)."""
+        from webline.diagnosis import regress
+        orders = sorted({j + 1 for r in ranked[:regress.MAX_RANKED] for j in np.flatnonzero(np.abs(r["X"]) > 0)})
+        if not orders:
+            return False
+        sel = regress.select(self, ranked, orders, fit)
+        if sel is None:
+            log.warning("  time-domain ranking of %s failed; harmonic ranking kept", ranked[0]["cand"].element)
+            return False
+        top = ranked[:regress.MAX_RANKED]
+        for i, r in enumerate(top):
+            r["X"] = sel["X"][i]
+            r["td_sse"] = sel["sse"][i] / sel["sse0"] if sel["sse0"] > 0 else 1.0
+        ordered = [top[i] for i in sel["order"]] + ranked[regress.MAX_RANKED:]
+        ranked[:] = ordered
+        log.info("  time-domain ranking: %s", ", ".join(f"{r['cand'].element} {r['td_sse']:.3f}"
+                                                         for r in ranked[:len(top)]))
+        self.final_effects.append({"ranked": ranked, "eff": eff})
+        if sel["pair"] is None:
+            return True
+        b, i, Xb, Xi, e2 = sel["pair"]
+        rb, ri = top[b], top[i]
+        rb["X"], ri["X"] = Xb, Xi
+        ri["td_sse"] = e2 / sel["sse0"] if sel["sse0"] > 0 else 1.0
+        frac = [float(np.sum(np.abs(X) ** 2)) for X in (Xb, Xi)]
+        for r, fr in zip((rb, ri), frac):
+            r["share"] = ranked[0]["score"]["share"] * fr / max(sum(frac), 1e-300)
+        rest = [x for x in ranked if x is not rb and x is not ri]
+        self.final_effects.append({"ranked": [ri] + rest, "eff": eff, "same_frequency_as": rb["cand"].element})
+        log.info("  %s also eccentric at the same frequency (time-domain fit)", ri["cand"].element)
+        return True
 
     def _split_same_frequency(self, ranked, eff, fit):
         """Several elements turning at the same speed (equal radii) may all be eccentric,
@@ -906,7 +963,10 @@ class Diagnosis:
         fit = self.fit_ctx()
         self.steps.append({"added": None, "sims": {c.name: c.nominal for c in self.ctx}})
         if self.opt.polish and self.final_effects:
-            self._polish_all(doc)
+            if self.opt.estimator == "time":
+                self._polish_time_domain(doc)
+            else:
+                self._polish_all(doc)
         cur = self.steps[0]["sims"]
         kept = []
         for i, fe in enumerate(self.final_effects):
@@ -1015,6 +1075,19 @@ class Diagnosis:
                 if Mp is None or Mp.shape != members[0]["M"].shape:
                     continue
                 _joint_solve(members, Mp, W, correct=True)
+
+    def _polish_time_domain(self, doc, steps=3):
+        """Gauss-Newton in the time domain for all periodic effects at once
+        (:func:`diagnosis.regress.gauss_newton`): the responses of the line to each
+        coefficient at the current estimate, simulated over the fit runs."""
+        from webline.diagnosis import regress
+        best = [fe["ranked"][0] for fe in self.final_effects]
+        cands = [b["cand"] for b in best]
+        orders = [[j + 1 for j in np.flatnonzero(np.abs(b["X"]) > 0)] for b in best]
+        Xs, sims, e, hist = regress.gauss_newton(self, doc, cands, [b["X"] for b in best], orders,
+                                                 self.fit_ctx(), steps=steps, label="polish")
+        for b, X in zip(best, Xs):
+            b["X"] = X
 
     def _harmonics_left(self, k, fit, sims):
         """Harmonics [(run, sensor), order] of data minus simulation on ``k``'s angle."""

@@ -342,6 +342,17 @@ def screen(d):
     to_b += [x for x in pars_a[2:] if x[0]["form"] == "as modelled"]
     for entry, alt0, X1s, Gs in to_b:
         name = entry["name"]
+        if d.opt.estimator == "time":
+            try:
+                X1s, sims1 = _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all)
+            except SimulationFailed as exc:
+                entry["not_screened"] = f"simulation failed: {exc}"
+                continue
+            nr1, sc1 = _score(d, sims1)
+            entry.update({"nrmse": nr1, "score": sc1, "X": X1s, "doc": with_all(alt0, X1s), "sims": sims1})
+            results.append(entry)
+            log.info("  form %-26s sum NRMSE^2 %.4g (as modelled %.4g)", name, sc1, cur_score)
+            continue
         try:
             sims1 = sim_fit(with_all(alt0, X1s), f"structure {name} refined")
             nr1, sc1 = _score(d, sims1)
@@ -452,6 +463,27 @@ def screen(d):
             r["harmonics_amplitude_m"] = {el: [float(abs(x)) for x in X] for el, X in r["X"].items()}
         for k in ("doc", "sims", "X", "_nom"):
             r.pop(k, None)
+
+
+def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
+    """The effects' coefficients in the form ``alt0`` by the time-domain fit
+    (:func:`diagnosis.regress.gauss_newton`), started from the better (by the
+    simulated residual) of the estimates as modelled and the form's harmonic
+    re-estimate ``X1s``. Returns (Xs by element, sims)."""
+    from webline.diagnosis import regress
+    use = [(cand, X0) for cand, X0, _ in effs if cand.element in X1s]
+    if not use:
+        return {}, sim_fit(alt0, f"structure {name} nominal")
+    cands = [cand for cand, _ in use]
+    orders = [[j + 1 for j in np.flatnonzero(np.abs(X0) > 0)] for _, X0 in use]
+    starts = []
+    for label, Xs in (("as modelled", [X0 for _, X0 in use]), ("re-estimate", [X1s[c.element] for c in cands])):
+        sims = sim_fit(with_all(alt0, dict(zip([c.element for c in cands], Xs))), f"structure {name} {label}")
+        starts.append((regress.sse(d, fit, sims), Xs, sims))
+    e, Xs, sims = min(starts, key=lambda x: x[0])
+    Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=2, sims=sims,
+                                            label=f"structure {name}")
+    return dict(zip([c.element for c in cands], Xs)), sims2
 
 
 def secondaries(d):

@@ -1,0 +1,235 @@
+"""Fourier coefficients of periodic effects in the time domain: the data regressed
+on simulated responses.
+
+The harmonic estimate (:mod:`diagnosis.estimate`: measured harmonic / model
+complex gain, one gain per order) assumes one operating point. Over a record
+whose line speed changes (ramps, two steady speeds) an order's frequency moves,
+and near a lightly damped line mode its gain changes by large factors: the
+estimate fits an average gain and the refined model, which has the true
+speed-dependent gain, can end farther from the data than the nominal one (an
+eccentric idler in a ramped record, its 6th order crossing an idler mode: NRMSE
+1 -> 2.2).
+
+Here the model itself supplies the regressors. The span-length change of order
+j is Re(X_j e^{i j theta}) ({27}-{32}); its effect on every sensor is, to first
+order, Re(X_j) r_j(t) + Im(X_j) q_j(t), where r_j and q_j are the simulated
+responses (of the whole line, transients, ramps and speed-dependent gains
+included) to X_j = a and X_j = i a, divided by a. The coefficients of all
+candidate elements follow from one weighted least-squares fit of the periodic
+residual over the fit runs (weights: each sensor's noise floor). Large
+eccentricities near a line mode respond nonlinearly (the element's angle itself
+is modulated), so the fit is a Gauss-Newton iteration: responses at the current
+estimate, a step, a line search on the simulated residual.
+
+The same regression tells elements at the same frequency apart (each one's
+residual energy) and decides whether two of them are eccentric: a second
+element is added only if it removes at least ``PAIR_GAIN`` of what the first
+leaves above the noise, with a well-conditioned joint fit (two elements in one
+tension zone at the same speed load the sensors alike and their joint fit
+diverges: they are one candidate list, not two sources).
+"""
+import logging
+
+import numpy as np
+
+from webline.diagnosis import estimate as est
+
+log = logging.getLogger("webline.diagnose")
+
+PAIR_GAIN = 0.5      # share of the excess residual (above noise) a second same-frequency source must remove
+PAIR_BLOWUP = 3.0    # joint amplitudes beyond this multiple of the single fits: the pair is degenerate
+MAX_RANKED = 4       # candidates of one effect regressed (best harmonic pattern fits first)
+
+
+def _doc(d, base, cands, Xs):
+    for k, X in zip(cands, Xs):
+        doc_X = np.asarray(X, complex)
+        base = d.with_effect(base, k, doc_X)
+    return base
+
+
+def _periodic(c, y):
+    return est.split_slow_periodic(y, c.fs, c.fc)[1]
+
+
+def _weights(c):
+    return {s: 1.0 / np.sqrt(max(float(np.median(c.floors[s].S)), 1e-300)) for s in c.sensors}
+
+
+def simulate(d, doc, ctxs, label):
+    """{run: Sim} or None if any run fails."""
+    sims = d.model.simulate_many([(c.run, doc, label) for c in ctxs])
+    if any(isinstance(s, Exception) for s in sims):
+        return None
+    return {c.name: s for c, s in zip(ctxs, sims)}
+
+
+def sse(d, ctxs, sims):
+    """Weighted energy of the periodic residual (data - simulation) over the fit samples."""
+    e = 0.0
+    for c in ctxs:
+        w = _weights(c)
+        for s in c.sensors:
+            r = _periodic(c, c.meas[s] - sims[c.name].columns[s])[c.mask]
+            e += w[s] ** 2 * float(np.sum(r * r))
+    return e
+
+
+def noise_sse(d, ctxs):
+    """What :func:`sse` would be with a perfect model: the noise floor (white at its median
+    level) over the periodic band of every fit sample."""
+    e = 0.0
+    for c in ctxs:
+        band = max(0.5 * c.fs - c.fc, 0.0)
+        for s in c.sensors:
+            e += float(c.mask.sum()) * band  # w^2 * median(S) * band per sample, w^2 = 1/median(S)
+    return e
+
+
+def responses(d, base, cands, Xs, orders, ctxs, sims0, label="response"):
+    """Finite-difference responses at the estimate ``Xs``: {run: {sensor: array (n_cols, N)}}
+    with columns (cand, order, real/imag) in that order, periodic part, per metre;
+    None if a simulation failed."""
+    a = d.opt.test_amplitude
+    jobs, cols = [], []
+    for i, k in enumerate(cands):
+        for j in orders[i]:
+            for ph in (1.0, 1j):
+                Xp = [np.array(X, complex) for X in Xs]
+                Xp[i][j - 1] += a * ph
+                doc = _doc(d, base, cands, Xp)
+                cols.append((i, j, ph))
+                jobs += [(c.run, doc, f"{label} {k.element} {j}{'i' if ph == 1j else ''}") for c in ctxs]
+    sims = d.model.simulate_many(jobs)
+    if any(isinstance(s, Exception) for s in sims):
+        return None, cols
+    n = len(ctxs)
+    out = {}
+    for ic, c in enumerate(ctxs):
+        out[c.name] = {}
+        for s in c.sensors:
+            y0 = sims0[c.name].columns[s]
+            out[c.name][s] = np.array([_periodic(c, (sims[m * n + ic].columns[s] - y0) / a)
+                                       for m in range(len(cols))])
+    return out, cols
+
+
+def solve(d, ctxs, resp, cols, sims0, subset=None):
+    """Weighted least squares of the periodic residual (data - sims0) on the response
+    columns (``subset``: indices of the columns used). Returns (coef, sse_before, sse_after)
+    with coef in metres per column (zero outside the subset)."""
+    idx = list(range(len(cols))) if subset is None else list(subset)
+    AtA = np.zeros((len(idx), len(idx)))
+    Aty = np.zeros(len(idx))
+    e0 = 0.0
+    for c in ctxs:
+        w = _weights(c)
+        for s in c.sensors:
+            A = resp[c.name][s][idx][:, c.mask] * w[s]
+            y = _periodic(c, c.meas[s] - sims0[c.name].columns[s])[c.mask] * w[s]
+            AtA += A @ A.T
+            Aty += A @ y
+            e0 += float(y @ y)
+    # an order a run cannot show (beyond its band) has a zero column: least squares, not solve
+    x = np.linalg.lstsq(AtA, Aty, rcond=1e-12)[0]
+    e1 = e0 - float(Aty @ x)
+    coef = np.zeros(len(cols))
+    coef[idx] = x
+    return coef, e0, max(e1, 0.0)
+
+
+def to_X(coef, cols, n_cands, H):
+    Xs = [np.zeros(H, complex) for _ in range(n_cands)]
+    for v, (i, j, ph) in zip(coef, cols):
+        Xs[i][j - 1] += v * ph
+    return Xs
+
+
+def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="time-domain fit"):
+    """Polish the coefficients ``Xs`` of ``cands`` (same order as ``orders``) in the
+    layout ``base`` on the fit runs ``ctxs``: responses at the current estimate,
+    a least-squares step, halved while the simulated residual does not fall.
+
+    Returns (Xs, sims, sse, history); the input estimate if no step helps."""
+    H = d.opt.harmonics
+    Xs = [np.array(X, complex) for X in Xs]
+    if sims is None:
+        sims = simulate(d, _doc(d, base, cands, Xs), ctxs, f"{label} start")
+        if sims is None:
+            return Xs, None, np.inf, []
+    e = sse(d, ctxs, sims)
+    hist = [e]
+    for it in range(steps):
+        resp, cols = responses(d, base, cands, Xs, orders, ctxs, sims, label=f"{label} {it + 1}")
+        if resp is None:
+            break
+        coef, _, e_pred = solve(d, ctxs, resp, cols, sims)
+        dX = to_X(coef, cols, len(cands), H)
+        lam, accepted = 1.0, False
+        for _ in range(3):
+            Xn = [X + lam * dx for X, dx in zip(Xs, dX)]
+            sn = simulate(d, _doc(d, base, cands, Xn), ctxs, f"{label} {it + 1} step {lam:g}")
+            if sn is not None:
+                en = sse(d, ctxs, sn)
+                if en < e:
+                    Xs, sims, accepted = Xn, sn, True
+                    break
+            lam *= 0.25
+        if not accepted:
+            break
+        log.info("  %s %d: periodic residual %.4g -> %.4g (predicted %.4g, step %g)", label, it + 1,
+                 e, en, e_pred, lam)
+        gain = (e - en) / e if e > 0 else 0.0
+        e = en
+        hist.append(e)
+        if gain < 0.01:
+            break
+    return Xs, sims, e, hist
+
+
+def select(d, ranked, orders, ctxs):
+    """Which of an effect's candidates (same frequency family) is eccentric, and whether a
+    second one is too: each candidate's responses at zero eccentricity (nominal layout),
+    its own least-squares fit, then the best pair. ``ranked``: harmonic-pattern ranking
+    (list of dicts with ``cand``). Returns a dict: ``order`` (indices into ranked, best
+    first), ``sse`` per index, ``X`` per index (single fits), ``pair`` (i, j, Xi, Xj, sse)
+    or None, ``sse0`` and ``noise``; None if a simulation failed."""
+    top = ranked[:MAX_RANKED]
+    cands = [r["cand"] for r in top]
+    H = d.opt.harmonics
+    base = d.model.copy_doc()
+    sims0 = {c.name: c.nominal for c in ctxs}
+    zeros = [np.zeros(H, complex) for _ in cands]
+    ords = [orders] * len(cands)
+    resp, cols = responses(d, base, cands, zeros, ords, ctxs, sims0, label="regressor")
+    if resp is None:
+        return None
+    per = {i: [m for m, col in enumerate(cols) if col[0] == i] for i in range(len(cands))}
+    single = {}
+    e0 = None
+    for i in per:
+        coef, e0, e1 = solve(d, ctxs, resp, cols, sims0, per[i])
+        single[i] = (e1, to_X(coef, cols, len(cands), H)[i])
+    order = sorted(single, key=lambda i: single[i][0])
+    noise = noise_sse(d, ctxs)
+    out = {"order": order, "sse": {i: single[i][0] for i in single}, "X": {i: single[i][1] for i in single},
+           "pair": None, "sse0": e0, "noise": noise, "resp": (resp, cols)}
+    b = order[0]
+    e_b = single[b][0]
+    best_pair = None
+    for i in order[1:]:
+        coef, _, e2 = solve(d, ctxs, resp, cols, sims0, per[b] + per[i])
+        Xp = to_X(coef, cols, len(cands), H)
+        lim = PAIR_BLOWUP * max(np.max(np.abs(single[b][1])), np.max(np.abs(single[i][1])), 1e-12)
+        if max(np.max(np.abs(Xp[b])), np.max(np.abs(Xp[i]))) > lim:
+            continue   # degenerate: the two load the sensors alike
+        if best_pair is None or e2 < best_pair[4]:
+            best_pair = (b, i, Xp[b], Xp[i], e2)
+    if best_pair is not None:
+        excess = max(e_b - noise, 1e-12 * max(e_b, 1e-300))
+        gain = (e_b - best_pair[4]) / excess
+        log.info("  same frequency: %s alone leaves %.4g, with %s %.4g (noise %.4g: removes %.0f %% of the excess)",
+                 cands[b].element, e_b, cands[best_pair[1]].element, best_pair[4], noise, 100 * gain)
+        if gain >= PAIR_GAIN:
+            out["pair"] = best_pair
+    return out
