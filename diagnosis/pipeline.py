@@ -373,25 +373,52 @@ class Diagnosis:
                 if j * f >= 1.5 * c.fc and j * f <= 0.4 * c.fs]
 
     def _family_fit(self, c, key, resid, theta=None):
-        """(Y per sensor, explained energy per sensor, z sum, n harmonics)."""
+        """(Y per sensor, explained energy per sensor, z sum, n harmonics).
+
+        Over a fit window of several steady speeds (a ramped run) each steady piece
+        gets its own harmonic amplitudes: an order sits at another frequency of the
+        line's response at each speed, so one phasor for the whole window would
+        explain only part of a real source. ``signal`` is the fitted family (zero
+        outside the fit samples); ``Y`` is the one-phasor fit (coherence weights)."""
         orders = self.orders_for(c, key)
         if not orders:
             return None
         th = c.theta[key] if theta is None else theta
         m = c.mask
-        out = {"orders": orders, "Y": {}, "E": {}, "z": 0.0, "n": 0, "z_order": {j: 0.0 for j in orders}}
-        freqs = np.array(orders) * c.freq[key]
+        out = {"orders": orders, "Y": {}, "E": {}, "z": 0.0, "n": 0, "z_order": {j: 0.0 for j in orders},
+               "signal": {}}
+        pieces = self._fit_pieces(c, th)
         for s in c.sensors:
-            Y = est.fit_harmonics(resid[s], th, orders, m)
-            fitted = est.harmonic_signal(th[m], Y, orders)
-            out["Y"][s], out["E"][s] = Y, float(np.sum(fitted ** 2))
-            z = est.harmonic_z(Y, freqs, c.floors[s], c.T)
-            out["z"] += float(np.sum(z))
-            out["n"] += len(orders)
-            for j, zj in zip(orders, z):
-                out["z_order"][j] += float(zj)
+            out["Y"][s] = est.fit_harmonics(resid[s], th, orders, m)
+            sig = np.zeros_like(resid[s])
+            for idx in pieces:
+                Y = est.fit_harmonics(resid[s][idx], th[idx], orders)
+                sig[idx] = est.harmonic_signal(th[idx], Y, orders)
+                T = len(idx) / c.fs
+                f = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi) / max(c.t[idx[-1]] - c.t[idx[0]], 1e-9)
+                z = est.harmonic_z(Y, np.array(orders) * f, c.floors[s], T)
+                out["z"] += float(np.sum(z))
+                out["n"] += len(orders)
+                for j, zj in zip(orders, z):
+                    out["z_order"][j] += float(zj)
+            out["signal"][s] = sig
+            out["E"][s] = float(np.sum(sig[m] ** 2))
         out["coherence"] = self._coherence(c, key, resid, th, orders, out)
         return out
+
+    MIN_PIECE_REVS = 3.0  # revolutions of an element a steady piece needs for its own fit
+
+    def _fit_pieces(self, c, th):
+        """Index arrays of the fit samples: one per contiguous piece of the fit mask (the
+        steady windows of a ramped run) if there are several and each holds
+        MIN_PIECE_REVS revolutions of the element, else the whole mask as one."""
+        idx_all = np.flatnonzero(c.mask)
+        cuts = np.flatnonzero(np.diff(idx_all) > 1) + 1
+        pieces = [p for p in np.split(idx_all, cuts) if len(p) > 1]
+        if len(pieces) > 1 and all(abs(th[p[-1]] - th[p[0]]) >= 2 * math.pi * self.MIN_PIECE_REVS
+                                   for p in pieces):
+            return pieces
+        return [idx_all]
 
     def _coherence(self, c, key, resid, th, orders, fit):
         """Stationarity of a family: the fit repeated on K consecutive segments of
@@ -503,9 +530,8 @@ class Diagnosis:
                 ff = best["fits"].get(c.name)
                 if ff is None:
                     continue
-                th = self._theta_refined(c, best["cand"])
                 for s in c.sensors:
-                    resid[c.name][s] = resid[c.name][s] - est.harmonic_signal(th, ff["Y"][s], ff["orders"])
+                    resid[c.name][s] = resid[c.name][s] - ff["signal"][s]
             remaining = [k for k in remaining if all(k is not d["cand"] for d in group)]
         self.resid_after_periodic = resid
         self._correct_run_conditions()
@@ -719,8 +745,10 @@ class Diagnosis:
         same-frequency source where the regression says so. False if a simulation failed
         (the harmonic ranking stands)."""
         from webline.diagnosis import regress
-        orders = sorted({j + 1 for r in ranked[:regress.MAX_RANKED] for j in np.flatnonzero(np.abs(r["X"]) > 0)})
-        if not orders:
+        # each candidate its own orders: where its harmonic estimate kept one (a roll at half
+        # an idler's speed carries the idler's order 1 as its order 2)
+        orders = [[j + 1 for j in np.flatnonzero(np.abs(r["X"]) > 0)] for r in ranked[:regress.MAX_RANKED]]
+        if not any(orders):
             return False
         sel = regress.select(self, ranked, orders, fit)
         if sel is None:

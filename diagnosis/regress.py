@@ -187,11 +187,46 @@ def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="ti
     return Xs, sims, e, hist
 
 
+Z_ORDER = 23.0      # chi-square (2 dof) an order's drop must pass against its local noise: p ~ 1e-5
+
+
+def noise_drop(d, ctxs, cand, j):
+    """Expected fall of :func:`sse` when an order-``j`` pair of regressors of ``cand``
+    is fitted to noise alone: per regressor the noise variance at that order's
+    frequency, sigma^2 = S(f_j) fs / 2, in the weighted units (w^2 = 1/median S);
+    the largest over the fit runs and sensors (a stacked fit removes about one
+    regressor's worth of the noisiest block)."""
+    out = 0.0
+    for c in ctxs:
+        f = j * c.freq.get(cand.key, 0.0)
+        for s in c.sensors:
+            S_med = max(float(np.median(c.floors[s].S)), 1e-300)
+            out = max(out, float(c.floors[s](np.array([f]))[0]) / S_med * 0.5 * c.fs)
+    return 2.0 * out
+
+
+def prune(d, ctxs, resp, cols, sims0, subset, cands):
+    """Columns of ``subset`` whose order is significant: refitting without an order
+    must raise the residual by more than Z_ORDER/2 times its noise drop (an order a
+    lightly damped mode hides gets a large coefficient from noise, and at another
+    speed that coefficient is no longer hidden)."""
+    subset = list(subset)
+    _, _, e_full = solve(d, ctxs, resp, cols, sims0, subset)
+    keep = list(subset)
+    for (i, j) in sorted({cols[m][:2] for m in subset}):
+        without = [m for m in subset if cols[m][:2] != (i, j)]
+        _, _, e_wo = solve(d, ctxs, resp, cols, sims0, without)
+        if e_wo - e_full < 0.5 * Z_ORDER * noise_drop(d, ctxs, cands[i], j):
+            keep = [m for m in keep if cols[m][:2] != (i, j)]
+    return keep
+
+
 def select(d, ranked, orders, ctxs):
     """Which of an effect's candidates (same frequency family) is eccentric, and whether a
     second one is too: each candidate's responses at zero eccentricity (nominal layout),
     its own least-squares fit, then the best pair. ``ranked``: harmonic-pattern ranking
-    (list of dicts with ``cand``). Returns a dict: ``order`` (indices into ranked, best
+    (list of dicts with ``cand``); ``orders``: per candidate, the orders to fit (an
+    order found insignificant in the time domain is dropped). Returns a dict: ``order`` (indices into ranked, best
     first), ``sse`` per index, ``X`` per index (single fits), ``pair`` (i, j, Xi, Xj, sse)
     or None, ``sse0`` and ``noise``; None if a simulation failed."""
     top = ranked[:MAX_RANKED]
@@ -200,11 +235,11 @@ def select(d, ranked, orders, ctxs):
     base = d.model.copy_doc()
     sims0 = {c.name: c.nominal for c in ctxs}
     zeros = [np.zeros(H, complex) for _ in cands]
-    ords = [orders] * len(cands)
-    resp, cols = responses(d, base, cands, zeros, ords, ctxs, sims0, label="regressor")
+    resp, cols = responses(d, base, cands, zeros, orders, ctxs, sims0, label="regressor")
     if resp is None:
         return None
     per = {i: [m for m, col in enumerate(cols) if col[0] == i] for i in range(len(cands))}
+    per = {i: prune(d, ctxs, resp, cols, sims0, per[i], cands) or per[i] for i in per}
     single = {}
     e0 = None
     for i in per:
