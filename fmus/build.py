@@ -5,6 +5,7 @@ Each FMU bundles ``webline/__init__.py``, ``webline/fmi_slave.py`` and
 (pythonfmu itself is bundled by its builder). A manifest holds the hash of
 the sources; an up-to-date folder is not rebuilt.
 """
+import functools
 import hashlib
 import json
 import os
@@ -56,6 +57,13 @@ def source_hash():
 
 def model_name(script):
     """Model identifier of an FMU script: the class defined in it (one per script)."""
+    st = Path(script).stat()
+    # parsed once per file version: every system the fast engine builds looks the models up
+    return _model_name(str(script), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=256)
+def _model_name(script, mtime_ns, size):
     import ast
     tree = ast.parse(Path(script).read_text())
     names = [n.name for n in tree.body if isinstance(n, ast.ClassDef)]

@@ -16,6 +16,7 @@ Web-handling units added to pint's defaults:
 * ``(ft/min)/lbf`` and the like for tension-loop gains (dimension
   ``"tension_gain"``, SI unit (m/s)/N = m/(s.N)).
 """
+import functools
 import math
 import re
 import warnings
@@ -114,6 +115,19 @@ def quantity(value, dimension, where=None, *, width=None):
 
 
 def _quantity(value, dimension, width):
+    if isinstance(value, str):
+        # a layout is read again for every variant a diagnosis simulates: the same few
+        # hundred strings each time, and pint's parser is most of a system's build time
+        return _quantity_of_text(value, dimension, width)
+    return _quantity_uncached(value, dimension, width)
+
+
+@functools.lru_cache(maxsize=8192)
+def _quantity_of_text(value, dimension, width):
+    return _quantity_uncached(value, dimension, width)
+
+
+def _quantity_uncached(value, dimension, width):
     if dimension in DIMENSIONS:
         dims, si_unit, example = DIMENSIONS[dimension]
     else:
