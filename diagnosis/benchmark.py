@@ -651,19 +651,20 @@ def summarize(results):
     gaps_in, gaps_out, gaps_in_ecc, gaps_out_ecc, oracle_out_ecc = [], [], [], [], []
     failed = []
     walls, cpus = [], []
-    reversing = {"true": 0, "matched": 0, "unknown": 0}
+    detect = {k: {"true": 0, "matched": 0, "unknown": 0} for k in DRIVE_KINDS}
     for res in results:
         tr, sc = res["truth"], res["score"]
         walls.append(res.get("wall_s") or 0.0)
         for t in tr["effects"]:
-            if t["kind"] == "backlash":
-                rev = torque_reverses(tr, t["element"])
-                if rev is None:
-                    reversing["unknown"] += 1
-                elif rev:
-                    reversing["true"] += 1
-                    reversing["matched"] += any(m["kind"] == "backlash" and m["element"] == t["element"]
-                                                for m in sc["matches"])
+            if t["kind"] in DRIVE_KINDS:
+                det = drive_detectable(tr, t)
+                dk = detect[t["kind"]]
+                if det is None:
+                    dk["unknown"] += 1
+                elif det:
+                    dk["true"] += 1
+                    dk["matched"] += any(m["kind"] == t["kind"] and m["element"] == t["element"]
+                                         for m in sc["matches"])
         if res.get("cpu_s"):
             cpus.append(res["cpu_s"])
         if res.get("report") is None:
@@ -719,7 +720,9 @@ def summarize(results):
         "dominant_amplitude_rel_error": _stats(amp_err),
         "dominant_phase_error_rad": _stats(ph_err),
         "noise_only": noise_only,
-        "backlash_with_torque_reversal": reversing,
+        # hidden drive effects that can be seen at all (:func:`drive_detectable`), and how many were found
+        "backlash_with_torque_reversal": detect["backlash"],
+        "drive_detectable": detect,
         "gap": {
             "in_sample_ratio": _stats(gaps_in), "held_out_ratio": _stats(gaps_out),
             "in_sample_ratio_periodic": _stats(gaps_in_ecc), "held_out_ratio_periodic": _stats(gaps_out_ecc),
@@ -746,6 +749,20 @@ def torque_reverses(truth, element, eps=0.01):
             continue
         seen = bool(seen) or (tq["min_Nm"] < -eps and tq["max_Nm"] > eps)
     return seen
+
+
+def drive_detectable(truth, effect):
+    """Whether a hidden drive effect can be seen in the fit runs at all (None:
+    not known). Measured where the case records it (``effect["detectable"]``:
+    the truth simulated with and without the effect against the measurement
+    error, :func:`diagnosis.benchmark_independent.drive_detectability`); else a
+    backlash only where its drive torque reverses (:func:`torque_reverses`)."""
+    d = effect.get("detectable")
+    if isinstance(d, dict) and "detectable" in d:
+        return bool(d["detectable"])
+    if effect["kind"] == "backlash":
+        return torque_reverses(truth, effect["element"])
+    return None
 
 
 def _stats(x):
@@ -845,12 +862,15 @@ def markdown(summary, results=None, meta=None):
         if k in PERIODIC:
             continue
         note = ""
-        rv = s.get("backlash_with_torque_reversal") or {}
-        if k == "backlash" and pk["true"]:
-            note = (f"; {rv.get('true', 0)} of the {pk['true']} hidden backlashes see a torque reversal in a fit "
-                    f"run (detectable), {rv.get('matched', 0)} of those found")
+        dd = s.get("drive_detectable") or {"backlash": s.get("backlash_with_torque_reversal") or {}}
+        rv = dd.get(k) or {}
+        if k in DRIVE_KINDS and pk["true"]:
+            basis = ("measured, else a torque reversal in a fit run" if k == "backlash"
+                     else "truth with and without it against the measurement error")
+            note = (f"; {rv.get('true', 0)} of the {pk['true']} hidden detectable ({basis}), "
+                    f"{rv.get('matched', 0)} of those found")
             if rv.get("unknown"):
-                note += f", {rv['unknown']} not recorded"
+                note += f", {rv['unknown']} not known"
         L.append(f"| {k}: precision / recall | {_pct(pk['precision'])} ({pk['matched']}/{pk['reported']}) / "
                  f"{_pct(pk['recall'])} ({pk['matched']}/{pk['true']}){note} | - | - |")
     no = s["noise_only"]

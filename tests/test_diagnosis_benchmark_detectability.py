@@ -1,0 +1,112 @@
+"""Detectability of a hidden drive effect in the benchmark's family "independent"
+(diagnosis.benchmark_independent.drive_detectability): the truth simulated with
+and without the effect, the difference against the measurement error the case
+injected. Known answers: a difference of zero is never detectable, a strong one
+where the effect acts always is, and one outside its band or without a torque
+reversal does not count."""
+import math
+
+import numpy as np
+import pytest
+
+from webline.diagnosis import benchmark as B
+from webline.diagnosis import benchmark_independent as BI
+
+
+def _noise(n, fs, sigma, seed=1):
+    return np.random.default_rng(seed).normal(0.0, sigma, n)
+
+
+FS, T = 250.0, 60.0
+t = np.arange(0.0, T, 1.0 / FS)
+
+
+def test_whitened_snr_of_a_sine_in_white_noise_is_the_matched_filter_one():
+    # known signal d in white noise of variance s^2: SNR^2 = sum(d^2) / s^2 = N A^2 / 2 / s^2
+    s, A, f = 0.3, 0.02, 5.0
+    d = A * np.sin(2 * math.pi * f * t)
+    snr, d_rms, n_rms = BI.whitened_snr(d, _noise(len(t), FS, s), FS)
+    expect = math.sqrt(len(t) * A * A / 2) / s
+    # the noise power per bin is estimated from one realisation smoothed over 0.5 Hz (61 bins):
+    # its relative error ~ 1/sqrt(61) = 13 % in power, half that in the SNR
+    assert snr == pytest.approx(expect, rel=0.15)
+    assert d_rms == pytest.approx(A / math.sqrt(2), rel=1e-3) and n_rms == pytest.approx(s, rel=0.02)
+
+
+def test_compliance_visibility_counts_only_its_band():
+    noise = _noise(len(t), FS, 0.3)
+    y0 = np.full(len(t), 100.0)
+    kw = dict(torsional_hz=5.0)
+    # no difference: nothing to see
+    v0 = BI.effect_visibility("compliance", t, y0, y0, noise, FS, **kw)
+    assert v0["snr_where"] == 0.0 and v0["snr_all"] == 0.0 and not BI._combine([v0])["detectable"]
+    # a 0.1 N ringing at the torsional mode in 0.3 N of noise over 60 s: SNR ~ 29
+    v1 = BI.effect_visibility("compliance", t, y0 + 0.1 * np.sin(2 * math.pi * 5.0 * t), y0, noise, FS, **kw)
+    assert v1["snr_where"] > 20 and BI._combine([v1])["detectable"]
+    # as strong, but at 15 Hz (outside 5 Hz -+ 30 %): visible overall, not where the effect acts
+    v2 = BI.effect_visibility("compliance", t, y0 + 0.1 * np.sin(2 * math.pi * 15.0 * t), y0, noise, FS, **kw)
+    assert v2["snr_all"] > 20 and v2["snr_where"] < 2 and not BI._combine([v2])["detectable"]
+    # SNRs of independent records add in quadrature: 4 records of SNR 3 make 6
+    c = BI._combine([{"snr_where": 3.0, "snr_all": 3.0}] * 4)
+    assert c["snr_where"] == pytest.approx(6.0) and c["detectable"]
+
+
+def test_backlash_visibility_needs_a_torque_reversal():
+    noise = _noise(len(t), FS, 0.3, seed=2)
+    y0 = np.full(len(t), 100.0)
+    # a 1 N transient decaying in 50 ms after the torque crosses zero at 30 s: sum(d^2) =
+    # FS * 0.05 / 2 = 6.25 samples' worth, SNR = sqrt(6.25) / 0.3 = 8.3 in white noise
+    bump = np.where(t >= 30.0, np.exp(-(t - 30.0) / 0.05), 0.0)
+    tau = np.where(t < 30.0, 0.5, -0.5)
+    v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=tau)
+    assert v["reversals"] == 1 and v["snr_where"] == pytest.approx(8.33, rel=0.15)
+    assert BI._combine([v])["detectable"]
+    # the same difference with a torque that never changes sign (a drive held by the web)
+    v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=np.full(len(t), 0.5))
+    assert v["reversals"] == 0 and v["snr_where"] == 0.0 and not BI._combine([v])["detectable"]
+    # torque wandering inside +-eps around zero is no reversal
+    assert BI.reversal_times(t, 0.005 * np.sin(t)) == []
+    # a reversal counts when the far side's eps is passed: eps / slope = 0.01 / (2 pi / 20) s after the zero
+    lag = BI.REVERSAL_EPS_NM / (2 * math.pi / 20.0)
+    assert BI.reversal_times(t, np.sin(2 * math.pi * t / 20.0)) == pytest.approx(
+        [10.0 + lag, 20.0 + lag, 30.0 + lag, 40.0 + lag, 50.0 + lag], abs=1.0 / FS)
+
+
+def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
+    """A compliance case made by the generator: the truth engine run with and without
+    the shaft, the measurement error regenerated from the case's seed (its rms is the
+    one the case recorded), the layout without it has the inertia back on the element."""
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    cases = BI.draw_cases(9, seed=0, layout_doc=doc, facts=facts)
+    case = next(c for c in cases if c.category == "compliance")
+    for r in case.runs:
+        r.duration_s = 3.0
+    truth = BI.make_case(case, tmp_path / "c", doc)
+    i = next(k for k, e in enumerate(truth["effects"]) if e["kind"] == "compliance")
+    det = truth["effects"][i]["detectable"]
+    assert det["threshold"] == BI.DETECT_SNR and isinstance(det["detectable"], bool)
+    fit = [r for r in truth["runs"] if not r["holdout"]]
+    assert [r["run"] for r in det["runs"]] == [r["name"] for r in fit]
+    for rr, r in zip(det["runs"], fit):
+        for lc, v in rr["sensors"].items():
+            assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=1e-9)
+            assert v["delta_rms_N"] > 0 and math.isfinite(v["snr_where"])
+    el = truth["effects"][i]["element"]
+    wo = BI._layout_without(truth, doc, tmp_path / "c" / "blind" / "line.yaml", i)["set"]
+    pset, _ = BI.param_set(BI.TruthModel(**truth["model"]), doc)
+    assert f"drives.speed_loops.{el}.drive" in truth["set"] and f"drives.speed_loops.{el}.drive" not in wo
+    moved = [k for k in pset if k.startswith(f"path.{el}.") and k in B.truth_set(case, BI.param_set(case.model, doc)[1])]
+    assert moved and all(wo[k] == pset[k] != truth["set"][k] for k in moved)
+    # the scorer: recall over all drive effects and over the detectable ones
+    t2 = {"id": "x", "effects": [dict(truth["effects"][i], detectable={"detectable": True}),
+                                 {"kind": "backlash", "element": "rewind", "detectable": {"detectable": False}}],
+          "runs": truth["runs"]}
+    rep = {"effects": [{"element": el, "kind": "compliance", "candidates": [el]}]}
+    s = BI.target_scores([{"truth": t2, "report": rep}])
+    assert {k: s["drive"][k] for k in ("true", "matched", "detectable", "matched_detectable")} == \
+        {"true": 2, "matched": 1, "detectable": 1, "matched_detectable": 1}
+    assert s["drive"]["recall"] == 0.5 and s["drive"]["recall_detectable"] == 1.0
+    assert s["recall"] == 0.5  # the headline stays over all effects
+    row = next(r for r in BI.target_rows(s) if r[3] == "drive_recall")
+    assert "all: 50 % (1/2); detectable only: 100 % (1/1)" in row[1]
