@@ -64,12 +64,12 @@ def test_backlash_visibility_needs_a_torque_reversal():
     # the same difference with a torque that never changes sign (a drive held by the web)
     v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=np.full(len(t), 0.5))
     assert v["reversals"] == 0 and v["snr_where"] == 0.0 and not BI._combine([v])["detectable"]
-    # torque wandering inside +-eps around zero is no reversal
-    assert BI.reversal_times(t, 0.005 * np.sin(t)) == []
-    # a reversal counts when the far side's eps is passed: eps / slope = 0.01 / (2 pi / 20) s after the zero
-    lag = BI.REVERSAL_EPS_NM / (2 * math.pi / 20.0)
-    assert BI.reversal_times(t, np.sin(2 * math.pi * t / 20.0)) == pytest.approx(
-        [10.0 + lag, 20.0 + lag, 30.0 + lag, 40.0 + lag, 50.0 + lag], abs=1.0 / FS)
+    # a torque that comes down to zero without changing sign opens the dead zone as well
+    tau = np.where(np.abs(t - 30.0) < 0.1, 0.0, 0.5)
+    v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=tau)
+    assert v["reversals"] == 1 and v["snr_where"] == pytest.approx(8.33, rel=0.15)
+    mask, k = BI.near_zero_windows(t, tau)
+    assert k == 1 and mask.mean() == pytest.approx(1.2 / T, abs=2.0 / FS / T)   # 0.2 s + 2 x 0.5 s
 
 
 def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
