@@ -864,7 +864,7 @@ def markdown(summary, results=None, meta=None):
         note = ""
         dd = s.get("drive_detectable") or {"backlash": s.get("backlash_with_torque_reversal") or {}}
         rv = dd.get(k) or {}
-        if k in DRIVE_KINDS and pk["true"]:
+        if k in DRIVE_KINDS and pk["true"] and rv.get("unknown", 0) < pk["true"]:
             basis = ("measured, else a torque reversal in a fit run" if k == "backlash"
                      else "truth with and without it against the measurement error")
             note = (f"; {rv.get('true', 0)} of the {pk['true']} hidden detectable ({basis}), "

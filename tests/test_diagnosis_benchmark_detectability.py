@@ -110,3 +110,38 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     assert s["recall"] == 0.5  # the headline stays over all effects
     row = next(r for r in BI.target_rows(s) if r[3] == "drive_recall")
     assert "all: 50 % (1/2); detectable only: 100 % (1/1)" in row[1]
+
+
+def test_summary_counts_detectable_drive_effects_and_says_so():
+    """The own family's summary and table: a recorded measurement decides, else a
+    backlash counts as detectable where its drive torque reverses, a compliance
+    without a measurement is not known (and gets no note)."""
+    def truth(i, effects, torque=None):
+        return {"id": f"c{i}", "category": "x", "effects": effects,
+                "runs": [{"name": "run1", "holdout": False, "fundamental_hz": {},
+                          "drive_torque": torque or {}, "sensors": {}}]}
+
+    bl = {"kind": "backlash", "element": "sw_leader", "indistinguishable": ["sw_leader"]}
+    co = {"kind": "compliance", "element": "sw_leader", "indistinguishable": ["sw_leader"]}
+    found = {"effects": [{"element": "sw_leader", "kind": "compliance", "candidates": ["sw_leader"]}]}
+    cases = [
+        (truth(1, [dict(co, detectable={"detectable": True})]), found),
+        (truth(2, [dict(co, detectable={"detectable": False})]), {"effects": []}),
+        (truth(3, [bl], {"sw_leader": {"min_Nm": -1.0, "max_Nm": 1.0}}), {"effects": []}),   # reverses
+        (truth(4, [bl], {"sw_leader": {"min_Nm": 0.5, "max_Nm": 1.0}}), {"effects": []}),    # never
+        (truth(5, [dict(bl, detectable={"detectable": False})], {"sw_leader": {"min_Nm": -1.0, "max_Nm": 1.0}}),
+         {"effects": []}),  # the measurement wins over the reversal
+    ]
+    results = [{"truth": t, "report": r, "score": B.score_case(t, r), "gap": None, "wall_s": 1.0} for t, r in cases]
+    s = B.summarize(results)
+    assert s["drive_detectable"]["compliance"] == {"true": 1, "matched": 1, "unknown": 0}
+    assert s["drive_detectable"]["backlash"] == {"true": 1, "matched": 0, "unknown": 0}
+    assert s["backlash_with_torque_reversal"] == s["drive_detectable"]["backlash"]
+    md = B.markdown(s)
+    assert "| compliance: precision / recall | 100 % (1/1) / 50 % (1/2); 1 of the 2 hidden detectable" in md
+    assert "| backlash: precision / recall | - (0/0) / 0 % (0/3); 1 of the 3 hidden detectable" in md
+    # a compliance without a measurement: not known, no note
+    t6 = truth(6, [co])
+    s6 = B.summarize([{"truth": t6, "report": found, "score": B.score_case(t6, found), "gap": None, "wall_s": 1.0}])
+    assert s6["drive_detectable"]["compliance"]["unknown"] == 1
+    assert "hidden detectable" not in B.markdown(s6)
