@@ -45,7 +45,7 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -406,6 +406,13 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                               "# the nominal line plus the hidden effects\n")
     t_gen = time.perf_counter()
     runs_out = []
+    drives = [i for i, e in enumerate(case.effects) if e.kind in DRIVE_KINDS]
+    # the truth without each drive effect (detectability: :func:`drive_visibility`)
+    without = {i: write_yaml(truth_dir / f"without_{i}.yaml", {
+        "base": os.path.relpath(line, truth_dir),
+        "set": truth_set(replace(case, effects=[e for j, e in enumerate(case.effects) if j != i]),
+                         line_doc)}) for i in drives}
+    seen = {i: [] for i in drives}
     for run in case.runs:
         exp = run_conditions(run)
         system = load_system(truth_layout, _overrides(exp))
@@ -424,6 +431,12 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                 cols[f"{lc} [lbf]"] = (y + n) / LBF
             else:
                 cols[f"{lc} [N]"] = y + n
+        for i in ([] if run.holdout else drives):
+            s0 = load_system(without[i], _overrides(exp))
+            s0.experiment.output_interval = 1.0 / FS
+            res0 = simulate(s0, fmu_paths=fmu_paths, progress=False)
+            if res0.ok:
+                seen[i].append(drive_visibility(case.effects[i], run, t, res, res0, clean, noise))
         master = facts["_master"]
         if "line_speed" in run.extra:
             cols["line_speed [ft/min]"] = np.asarray(res[f"{master}.v"]) / FPM
@@ -451,12 +464,35 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                              "std_measured_N": float(np.std(clean[lc] + noise[lc])),
                              "n": int(len(t))} for lc in clean},
         })
+    effects = [_effect_truth(e, facts) for e in case.effects]
+    for i, per in seen.items():
+        if per:
+            from webline.diagnosis.benchmark_independent import _combine
+            effects[i]["detectable"] = {**_combine([v for r in per for v in r["sensors"].values()]), "runs": per}
     truth = {"id": case.id, "category": case.category, "seed": case.seed,
-             "effects": [_effect_truth(e, facts) for e in case.effects],
+             "effects": effects,
              "runs": runs_out, "generation_s": time.perf_counter() - t_gen, "truth_engine": engine,
              "blind_folder": str(blind), "truth_layout": str(truth_layout)}
     (truth_dir / "truth.json").write_text(json.dumps(truth, indent=1))
     return truth
+
+
+def drive_visibility(effect, run, t, res, res0, clean, noise):
+    """One fit run's record of how visible a drive effect is at each load cell:
+    ``res`` / ``res0`` the truth with / without it, ``clean`` / ``noise`` the
+    tensions and the noise added (see
+    :func:`diagnosis.benchmark_independent.effect_visibility`)."""
+    from webline.diagnosis.benchmark_independent import effect_visibility
+    t = np.asarray(t, float)
+    m = t >= t[0] + min(1.0, 0.1 * run.duration_s)  # the diagnosis's settled window
+    col = f"{effect.element}_speed_pi.tau"
+    tau = np.asarray(res[col], float)[m] if col in res else None
+    out = {"run": run.name, "sensors": {}}
+    for lc, y in clean.items():
+        y0 = np.asarray(res0[f"{lc}.T"], float)
+        out["sensors"][lc] = effect_visibility(effect.kind, t[m], y[m], y0[m], noise[lc][m], FS, tau=tau,
+                                               torsional_hz=(effect.drive or {}).get("torsional_hz"))
+    return out
 
 
 def _effect_truth(e, facts):

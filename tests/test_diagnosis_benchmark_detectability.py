@@ -145,3 +145,28 @@ def test_summary_counts_detectable_drive_effects_and_says_so():
     s6 = B.summarize([{"truth": t6, "report": found, "score": B.score_case(t6, found), "gap": None, "wall_s": 1.0}])
     assert s6["drive_detectable"]["compliance"]["unknown"] == 1
     assert "hidden detectable" not in B.markdown(s6)
+
+
+def test_own_family_records_detectability_of_its_drive_effects(tmp_path):
+    """The family "own" measures detectability the same way (truth with and without
+    the effect, against the white noise it added): a backlash whose drive torque never
+    reverses (on the unwind, held back by the web) changes next to nothing; one on the
+    speed master, whose torque does reverse in the speed ramp, stands far out."""
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    cases = {c.id: c for c in B.draw_cases(24, seed=0, layout_doc=doc, facts=facts)}
+    got = {}
+    for cid in ("c06", "c18"):  # rewind backlash / sw_leader backlash (the draw's, pinned by seed 0)
+        case = cases[cid]
+        assert [(e.kind, e.element) for e in case.effects] == [("backlash", "rewind" if cid == "c06" else "sw_leader")]
+        truth = B.make_case(case, tmp_path / cid, doc)
+        det = truth["effects"][0]["detectable"]
+        fit = [r for r in truth["runs"] if not r["holdout"]]
+        for rr, r in zip(det["runs"], fit):
+            for lc, v in rr["sensors"].items():
+                # the same noise draw: the case records it over the whole record, the visibility
+                # over the settled window (1 s of 10 s less): equal within the rms's sampling error
+                assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=0.03)
+        got[cid] = det
+    assert not got["c06"]["detectable"] and got["c06"]["snr_where"] == 0.0
+    assert got["c18"]["detectable"] and got["c18"]["snr_where"] > 10 * BI.DETECT_SNR
