@@ -870,6 +870,10 @@ def drive_detectability(truth, folder, *, simulate=None):
     line_path = folder / "blind" / "line.yaml"
     line_doc = yaml.safe_load(line_path.read_text())
     facts = B.line_facts(line_path)
+    # the folder's own truth layout (the recorded path is where the case was made)
+    truth_layout = folder / "truth" / "truth_layout.yaml"
+    if not truth_layout.exists():
+        truth_layout = Path(truth["truth_layout"])
     out = {}
     fields = set(IRunSpec.__dataclass_fields__)
     with tempfile.TemporaryDirectory() as tmp:
@@ -884,7 +888,7 @@ def drive_detectability(truth, folder, *, simulate=None):
                 run = IRunSpec(**{k: v for k, v in r["spec"].items() if k in fields})
                 t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
                 ov = B._overrides(r["truth_conditions"])
-                res = simulate(load_system(truth["truth_layout"], ov), t)
+                res = simulate(load_system(truth_layout, ov), t)
                 res0 = simulate(load_system(wo, ov), t)
                 tt = np.asarray(res.time, float)
                 settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)

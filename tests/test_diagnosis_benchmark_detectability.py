@@ -82,7 +82,8 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     case = next(c for c in cases if c.category == "compliance")
     for r in case.runs:
         r.duration_s = 3.0
-    truth = BI.make_case(case, tmp_path / "c", doc)
+    folder = tmp_path / "independent" / "cases" / case.id
+    truth = BI.make_case(case, folder, doc)
     i = next(k for k, e in enumerate(truth["effects"]) if e["kind"] == "compliance")
     det = truth["effects"][i]["detectable"]
     assert det["threshold"] == BI.DETECT_SNR and isinstance(det["detectable"], bool)
@@ -93,7 +94,7 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
             assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=1e-9)
             assert v["delta_rms_N"] > 0 and math.isfinite(v["snr_where"])
     el = truth["effects"][i]["element"]
-    wo = BI._layout_without(truth, doc, tmp_path / "c" / "blind" / "line.yaml", i)["set"]
+    wo = BI._layout_without(truth, doc, folder / "blind" / "line.yaml", i)["set"]
     pset, _ = BI.param_set(BI.TruthModel(**truth["model"]), doc)
     assert f"drives.speed_loops.{el}.drive" in truth["set"] and f"drives.speed_loops.{el}.drive" not in wo
     moved = [k for k in pset if k.startswith(f"path.{el}.") and k in B.truth_set(case, BI.param_set(case.model, doc)[1])]
@@ -170,3 +171,34 @@ def test_own_family_records_detectability_of_its_drive_effects(tmp_path):
         got[cid] = det
     assert not got["c06"]["detectable"] and got["c06"]["snr_where"] == 0.0
     assert got["c18"]["detectable"] and got["c18"]["snr_where"] > 10 * BI.DETECT_SNR
+
+
+
+def test_rescore_measures_detectability_of_cases_made_before(tmp_path):
+    """A case folder whose truth.json has no ``detectable`` (made before it was
+    measured) gets it on a rescore, the same numbers as when the case is made."""
+    import json
+    from webline.diagnosis import benchmark_cmd
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    case = next(c for c in BI.draw_cases(9, seed=0, layout_doc=doc, facts=facts) if c.category == "compliance")
+    for r in case.runs:
+        r.duration_s = 3.0
+    folder = tmp_path / "independent" / "cases" / case.id
+    made = BI.make_case(case, folder, doc)
+    p = folder / "truth" / "truth.json"
+    old = json.loads(p.read_text())
+    for e in old["effects"]:
+        e.pop("detectable", None)
+    p.write_text(json.dumps(old))
+    (folder / "diagnosis").mkdir()
+    (folder / "diagnosis" / "report.json").write_text(json.dumps({"effects": []}))
+    out = tmp_path / "res.json"
+    assert benchmark_cmd.main(["--family", "independent", "--rescore", "--out", str(tmp_path),
+                               "--results", str(out)]) == 0
+    new = json.loads(p.read_text())
+    i = next(k for k, e in enumerate(made["effects"]) if e["kind"] == "compliance")
+    assert new["effects"][i]["detectable"]["snr_where"] == pytest.approx(made["effects"][i]["detectable"]["snr_where"],
+                                                                           rel=1e-9)
+    ts = json.loads(out.read_text())["families"]["independent"]["target_scores"]
+    assert ts["drive"]["true"] == 1 and ts["drive"]["unknown"] == 0
