@@ -36,7 +36,14 @@ median ``closed_share`` = (nominal - refined) / (nominal - achievable) at the
 most affected sensor, in sample and held out, the achievable NRMSE being the
 measurement error the generator injected (known exactly); the dominant
 harmonic's amplitude within 20 % or flagged not identifiable; periodic sources
-invented on noise-only records.
+invented on noise-only records. Beside the headline (all effects), the recall
+of the hidden drive effects over all of them and over the *detectable* ones
+only: :func:`drive_detectability` simulates the truth with and without each
+drive effect and compares the difference with the measurement error the case
+injected (regenerated from its seed), as a whitened matched-filter SNR overall
+and where the effect acts (compliance: the band around its torsional mode;
+backlash: around the times its drive torque is at zero); detectable = that SNR,
+combined over load cells and fit runs, >= DETECT_SNR.
 """
 import copy
 import json
