@@ -97,7 +97,8 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     wo = BI._layout_without(truth, doc, folder / "blind" / "line.yaml", i)["set"]
     pset, _ = BI.param_set(BI.TruthModel(**truth["model"]), doc)
     assert f"drives.speed_loops.{el}.drive" in truth["set"] and f"drives.speed_loops.{el}.drive" not in wo
-    moved = [k for k in pset if k.startswith(f"path.{el}.") and k in B.truth_set(case, BI.param_set(case.model, doc)[1])]
+    tset = B.truth_set(case, BI.param_set(case.model, doc)[1])
+    moved = [k for k in pset if k.startswith(f"path.{el}.") and k in tset]
     assert moved and all(wo[k] == pset[k] != truth["set"][k] for k in moved)
     # the scorer: recall over all drive effects and over the detectable ones
     t2 = {"id": "x", "effects": [dict(truth["effects"][i], detectable={"detectable": True}),
