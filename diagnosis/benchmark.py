@@ -45,7 +45,7 @@ import os
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -406,6 +406,13 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                               "# the nominal line plus the hidden effects\n")
     t_gen = time.perf_counter()
     runs_out = []
+    drives = [i for i, e in enumerate(case.effects) if e.kind in DRIVE_KINDS]
+    # the truth without each drive effect (detectability: :func:`drive_visibility`)
+    without = {i: write_yaml(truth_dir / f"without_{i}.yaml", {
+        "base": os.path.relpath(line, truth_dir),
+        "set": truth_set(replace(case, effects=[e for j, e in enumerate(case.effects) if j != i]),
+                         line_doc)}) for i in drives}
+    seen = {i: [] for i in drives}
     for run in case.runs:
         exp = run_conditions(run)
         system = load_system(truth_layout, _overrides(exp))
@@ -424,6 +431,12 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                 cols[f"{lc} [lbf]"] = (y + n) / LBF
             else:
                 cols[f"{lc} [N]"] = y + n
+        for i in ([] if run.holdout else drives):
+            s0 = load_system(without[i], _overrides(exp))
+            s0.experiment.output_interval = 1.0 / FS
+            res0 = simulate(s0, fmu_paths=fmu_paths, progress=False)
+            if res0.ok:
+                seen[i].append(drive_visibility(case.effects[i], run, t, res, res0, clean, noise))
         master = facts["_master"]
         if "line_speed" in run.extra:
             cols["line_speed [ft/min]"] = np.asarray(res[f"{master}.v"]) / FPM
@@ -451,12 +464,35 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                              "std_measured_N": float(np.std(clean[lc] + noise[lc])),
                              "n": int(len(t))} for lc in clean},
         })
+    effects = [_effect_truth(e, facts) for e in case.effects]
+    for i, per in seen.items():
+        if per:
+            from webline.diagnosis.benchmark_independent import _combine
+            effects[i]["detectable"] = {**_combine([v for r in per for v in r["sensors"].values()]), "runs": per}
     truth = {"id": case.id, "category": case.category, "seed": case.seed,
-             "effects": [_effect_truth(e, facts) for e in case.effects],
+             "effects": effects,
              "runs": runs_out, "generation_s": time.perf_counter() - t_gen, "truth_engine": engine,
              "blind_folder": str(blind), "truth_layout": str(truth_layout)}
     (truth_dir / "truth.json").write_text(json.dumps(truth, indent=1))
     return truth
+
+
+def drive_visibility(effect, run, t, res, res0, clean, noise):
+    """One fit run's record of how visible a drive effect is at each load cell:
+    ``res`` / ``res0`` the truth with / without it, ``clean`` / ``noise`` the
+    tensions and the noise added (see
+    :func:`diagnosis.benchmark_independent.effect_visibility`)."""
+    from webline.diagnosis.benchmark_independent import effect_visibility
+    t = np.asarray(t, float)
+    m = t >= t[0] + min(1.0, 0.1 * run.duration_s)  # the diagnosis's settled window
+    col = f"{effect.element}_speed_pi.tau"
+    tau = np.asarray(res[col], float)[m] if col in res else None
+    out = {"run": run.name, "sensors": {}}
+    for lc, y in clean.items():
+        y0 = np.asarray(res0[f"{lc}.T"], float)
+        out["sensors"][lc] = effect_visibility(effect.kind, t[m], y[m], y0[m], noise[lc][m], FS, tau=tau,
+                                               torsional_hz=(effect.drive or {}).get("torsional_hz"))
+    return out
 
 
 def _effect_truth(e, facts):
@@ -651,19 +687,20 @@ def summarize(results):
     gaps_in, gaps_out, gaps_in_ecc, gaps_out_ecc, oracle_out_ecc = [], [], [], [], []
     failed = []
     walls, cpus = [], []
-    reversing = {"true": 0, "matched": 0, "unknown": 0}
+    detect = {k: {"true": 0, "matched": 0, "unknown": 0} for k in DRIVE_KINDS}
     for res in results:
         tr, sc = res["truth"], res["score"]
         walls.append(res.get("wall_s") or 0.0)
         for t in tr["effects"]:
-            if t["kind"] == "backlash":
-                rev = torque_reverses(tr, t["element"])
-                if rev is None:
-                    reversing["unknown"] += 1
-                elif rev:
-                    reversing["true"] += 1
-                    reversing["matched"] += any(m["kind"] == "backlash" and m["element"] == t["element"]
-                                                for m in sc["matches"])
+            if t["kind"] in DRIVE_KINDS:
+                det = drive_detectable(tr, t)
+                dk = detect[t["kind"]]
+                if det is None:
+                    dk["unknown"] += 1
+                elif det:
+                    dk["true"] += 1
+                    dk["matched"] += any(m["kind"] == t["kind"] and m["element"] == t["element"]
+                                         for m in sc["matches"])
         if res.get("cpu_s"):
             cpus.append(res["cpu_s"])
         if res.get("report") is None:
@@ -719,7 +756,9 @@ def summarize(results):
         "dominant_amplitude_rel_error": _stats(amp_err),
         "dominant_phase_error_rad": _stats(ph_err),
         "noise_only": noise_only,
-        "backlash_with_torque_reversal": reversing,
+        # hidden drive effects that can be seen at all (:func:`drive_detectable`), and how many were found
+        "backlash_with_torque_reversal": detect["backlash"],
+        "drive_detectable": detect,
         "gap": {
             "in_sample_ratio": _stats(gaps_in), "held_out_ratio": _stats(gaps_out),
             "in_sample_ratio_periodic": _stats(gaps_in_ecc), "held_out_ratio_periodic": _stats(gaps_out_ecc),
@@ -746,6 +785,20 @@ def torque_reverses(truth, element, eps=0.01):
             continue
         seen = bool(seen) or (tq["min_Nm"] < -eps and tq["max_Nm"] > eps)
     return seen
+
+
+def drive_detectable(truth, effect):
+    """Whether a hidden drive effect can be seen in the fit runs at all (None:
+    not known). Measured where the case records it (``effect["detectable"]``:
+    the truth simulated with and without the effect against the measurement
+    error, :func:`diagnosis.benchmark_independent.drive_detectability`); else a
+    backlash only where its drive torque reverses (:func:`torque_reverses`)."""
+    d = effect.get("detectable")
+    if isinstance(d, dict) and "detectable" in d:
+        return bool(d["detectable"])
+    if effect["kind"] == "backlash":
+        return torque_reverses(truth, effect["element"])
+    return None
 
 
 def _stats(x):
@@ -845,12 +898,15 @@ def markdown(summary, results=None, meta=None):
         if k in PERIODIC:
             continue
         note = ""
-        rv = s.get("backlash_with_torque_reversal") or {}
-        if k == "backlash" and pk["true"]:
-            note = (f"; {rv.get('true', 0)} of the {pk['true']} hidden backlashes see a torque reversal in a fit "
-                    f"run (detectable), {rv.get('matched', 0)} of those found")
+        dd = s.get("drive_detectable") or {"backlash": s.get("backlash_with_torque_reversal") or {}}
+        rv = dd.get(k) or {}
+        if k in DRIVE_KINDS and pk["true"] and rv.get("unknown", 0) < pk["true"]:
+            basis = ("measured, else a torque reversal in a fit run" if k == "backlash"
+                     else "truth with and without it against the measurement error")
+            note = (f"; {rv.get('true', 0)} of the {pk['true']} hidden detectable ({basis}), "
+                    f"{rv.get('matched', 0)} of those found")
             if rv.get("unknown"):
-                note += f", {rv['unknown']} not recorded"
+                note += f", {rv['unknown']} not known"
         L.append(f"| {k}: precision / recall | {_pct(pk['precision'])} ({pk['matched']}/{pk['reported']}) / "
                  f"{_pct(pk['recall'])} ({pk['matched']}/{pk['true']}){note} | - | - |")
     no = s["noise_only"]

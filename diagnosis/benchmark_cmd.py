@@ -167,6 +167,15 @@ def rescore(out, results_path=None, family="own"):
     from webline.diagnosis import benchmark as B
     work = family_folder(out, family)
     folders = sorted(p for p in (work / "cases").glob("*") if (p / "truth" / "truth.json").exists())
+    if family == "independent":  # cases made before detectability was measured: measure it now
+        from webline.diagnosis import benchmark_independent as BI
+        for p in folders:
+            tr = json.loads((p / "truth" / "truth.json").read_text())
+            if any(e["kind"] in B.DRIVE_KINDS and "detectable" not in e for e in tr["effects"]) and tr.get("runs"):
+                try:
+                    BI.add_detectability(p)
+                except Exception as exc:  # noqa: BLE001 - recorded as not known, the rescore goes on
+                    print(f"{p.name}: detectability not measured ({str(exc)[:200]})")
     results = [B.load_case(p) for p in folders]
     summary = B.summarize(results)
     summary["generation_failures"] = []

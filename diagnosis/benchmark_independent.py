@@ -36,7 +36,14 @@ median ``closed_share`` = (nominal - refined) / (nominal - achievable) at the
 most affected sensor, in sample and held out, the achievable NRMSE being the
 measurement error the generator injected (known exactly); the dominant
 harmonic's amplitude within 20 % or flagged not identifiable; periodic sources
-invented on noise-only records.
+invented on noise-only records. Beside the headline (all effects), the recall
+of the hidden drive effects over all of them and over the *detectable* ones
+only: :func:`drive_detectability` simulates the truth with and without each
+drive effect and compares the difference with the measurement error the case
+injected (regenerated from its seed), as a whitened matched-filter SNR overall
+and where the effect acts (compliance: the band around its torsional mode;
+backlash: around the times its drive torque is at zero); detectable = that SNR,
+combined over load cells and fit runs, >= DETECT_SNR.
 """
 import copy
 import json
@@ -437,6 +444,9 @@ def make_case(case, folder, line_doc, fmu_paths=None, *, simulate=None):
              "model": asdict(case.model), "forms_applied": frec, "set": tset,
              "runs": runs_out, "generation_s": time.perf_counter() - t_gen,
              "blind_folder": str(blind), "truth_layout": str(truth_layout)}
+    # each hidden drive effect: can the data show it at all? (the truth with and without it)
+    for i, rec in drive_detectability(truth, folder, simulate=simulate).items():
+        truth["effects"][i]["detectable"] = rec
     (truth_dir / "truth.json").write_text(json.dumps(truth, indent=1))
     return truth
 
@@ -541,6 +551,9 @@ def case_targets(truth, report, score=None):
         amp.append({"element": m["element"], "rel_error": err, "flagged_not_identifiable": flagged,
                     "ok": bool(flagged or (err is not None and err <= AMP_TOL))})
     noise_only = not truth["effects"]
+    drive = [{"element": t["element"], "kind": t["kind"], "detectable": B.drive_detectable(truth, t),
+              "found": any(m["kind"] == t["kind"] and m["element"] == t["element"] for m in kept)}
+             for t in truth["effects"] if t["kind"] in B.DRIVE_KINDS]
     return {
         "true": score["n_true"], "reported": len(reported), "matched": len(kept), "other_reports": other,
         "ambiguous": sum(m["mode"] == "ambiguous" for m in kept),
@@ -554,6 +567,7 @@ def case_targets(truth, report, score=None):
         "noise_only": noise_only,
         "invented_periodic": (sum(e.get("kind") in B.PERIODIC for e in reported) if noise_only else 0),
         "invented_any": len(everything) if noise_only else 0,
+        "drive": drive,
     }
 
 
@@ -575,6 +589,7 @@ def target_scores(results):
     cs_in, cs_out = [], []
     noise = {"cases": 0, "records": 0, "ramped_records": 0, "invented_periodic": 0, "invented_any": 0}
     diagnosed = 0
+    drive = {"true": 0, "matched": 0, "detectable": 0, "matched_detectable": 0, "unknown": 0}
     for res in results:
         tr, rep = res["truth"], res.get("report")
         if rep is None:
@@ -600,6 +615,14 @@ def target_scores(results):
                 if v and v["closed_share"] is not None:
                     lst.append(v["closed_share"])
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
+        for dv in c["drive"]:
+            drive["true"] += 1
+            drive["matched"] += dv["found"]
+            if dv["detectable"] is None:
+                drive["unknown"] += 1
+            elif dv["detectable"]:
+                drive["detectable"] += 1
+                drive["matched_detectable"] += dv["found"]
         if c["noise_only"]:
             noise["cases"] += 1
             noise["records"] += len(tr["runs"])
@@ -619,6 +642,10 @@ def target_scores(results):
                       "flagged": sum(a["flagged_not_identifiable"] for a in amp),
                       "rel_errors": B._stats([a["rel_error"] for a in amp])},
         "noise_only": noise, "targets": TARGETS,
+        # beside the headline (all effects): drive-effect recall over all hidden drive effects
+        # and over those the data can show at all (B.drive_detectable; unknown ones left out)
+        "drive": {**drive, "recall": B._ratio(drive["matched"], drive["true"]),
+                  "recall_detectable": B._ratio(drive["matched_detectable"], drive["detectable"])},
     }
     s["verdict"] = _verdicts(s)
     return s
@@ -636,6 +663,7 @@ def _verdicts(s):
         "closed_share_held_out": ge(s["closed_share_held_out"]["median"], TARGETS["closed_share_median"]),
         "amplitude": "n/a" if not a["n"] else "pass" if a["ok"] == a["n"] else "fail",
         "no_invented_periodic": "n/a" if not no["cases"] else "pass" if not no["invented_periodic"] else "fail",
+        "drive_recall": "n/a" if not (s.get("drive") or {}).get("true") else "no target",
     }
 
 
@@ -668,11 +696,21 @@ def target_rows(s):
         ("dominant run-out amplitude within 20 % or flagged",
          f"{a['ok']}/{a['n']} (median error {B._pct2(a['rel_errors']['median'])}, {a['flagged']} flagged)",
          "all", "amplitude"),
+        ("drive effects (backlash, compliance): recall over all hidden / over the detectable only",
+         _drive_cell(s.get("drive") or {}), "-", "drive_recall"),
         ("periodic sources invented on noise-only records",
          f"{no['invented_periodic']} in {no['records']} records ({no['ramped_records']} ramped) of {no['cases']} cases"
          + (f" ({no['invented_any']} findings of any kind)" if no["invented_any"] else ""),
          "0", "no_invented_periodic"),
     ]
+
+
+def _drive_cell(d):
+    if not d.get("true"):
+        return "-"
+    unk = f", {d['unknown']} not known" if d.get("unknown") else ""
+    return (f"all: {_pct(d['recall'])} ({d['matched']}/{d['true']}); detectable only: "
+            f"{_pct(d['recall_detectable'])} ({d['matched_detectable']}/{d['detectable']}{unk})")
 
 
 def side_by_side(scores):
@@ -681,7 +719,7 @@ def side_by_side(scores):
     L = ["| measure | " + " | ".join(fams) + " | target |", "|---|" + "---|" * len(fams) + "---|"]
     rows = {f: target_rows(scores[f]) for f in fams}
     for i, (name, _, target, key) in enumerate(rows[fams[0]]):
-        cells = [f"{rows[f][i][1]} ({scores[f]['verdict'][key]})" for f in fams]
+        cells = [f"{rows[f][i][1]} ({scores[f]['verdict'].get(key, 'n/a')})" for f in fams]
         L.append(f"| {name} | " + " | ".join(cells) + f" | {target} |")
     return "\n".join(L) + "\n"
 
@@ -696,3 +734,194 @@ def forms_summary(results):
             d["drawn"] += 1
             d["applied"] += rec.get("applied") is not None
     return out
+
+
+# ============================================================ detectability ====
+DETECT_SNR = 5.0          # matched-filter SNR a drive effect needs to count as detectable
+BAND_REL = 0.3            # compliance: band f_t * (1 -+ BAND_REL) around the torsional mode
+REVERSAL_WINDOW_S = 0.5   # backlash: +- this around each time the truth's drive torque reaches zero
+REVERSAL_EPS_NM = 0.01    # torque within +- this of zero is no side (as B.torque_reverses) ...
+REVERSAL_REL = 0.02       # ... or within this share of its range (as the diagnosis's screen, others.REVERSAL)
+PSD_SMOOTH_HZ = 0.5       # noise PSD: the periodogram of the injected error smoothed over this width
+
+
+def _noise_psd(noise, fs, n_fft):
+    """Per-bin noise power |N_k|^2 of one realisation, smoothed (moving mean over
+    PSD_SMOOTH_HZ) so that it estimates the expected power of each bin."""
+    P = np.abs(np.fft.rfft(noise, n_fft)) ** 2
+    w = max(1, int(round(PSD_SMOOTH_HZ * n_fft / fs / 2)))
+    k = np.ones(2 * w + 1) / (2 * w + 1)
+    Pp = np.pad(P, w, mode="reflect")
+    return np.convolve(Pp, k, mode="valid")
+
+
+def whitened_snr(delta, noise, fs, band=None):
+    """Matched-filter SNR of a known difference ``delta`` in the coloured noise of
+    which ``noise`` is one realisation: sqrt(sum_k |D_k|^2 / S_k) over the rfft bins
+    (``band`` = (f_lo, f_hi) keeps only those), S_k the smoothed noise periodogram.
+    Returns (snr, rms of delta in the band, rms of noise in the band)."""
+    delta = np.asarray(delta, float)
+    noise = np.asarray(noise, float)
+    n = len(delta)
+    if n < 8:
+        return 0.0, 0.0, 0.0
+    D = np.fft.rfft(delta - np.mean(delta))
+    Nk = np.fft.rfft(noise - np.mean(noise))
+    S = _noise_psd(noise - np.mean(noise), fs, n)
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    m = f > 0
+    if band is not None:
+        m &= (f >= band[0]) & (f <= band[1])
+    if not m.any():
+        return 0.0, 0.0, 0.0
+    # Parseval on the one-sided spectrum: rms^2 of the band part = 2 sum |X_k|^2 / n^2
+    d_rms = math.sqrt(2.0 * float(np.sum(np.abs(D[m]) ** 2))) / n
+    n_rms = math.sqrt(2.0 * float(np.sum(np.abs(Nk[m]) ** 2))) / n
+    snr = math.sqrt(2.0 * float(np.sum(np.abs(D[m]) ** 2 / np.maximum(S[m], 1e-300))))
+    return snr, d_rms, n_rms
+
+
+def near_zero_windows(t, tau, half=REVERSAL_WINDOW_S, eps=REVERSAL_EPS_NM, rel=REVERSAL_REL):
+    """(mask, episodes): samples within ``half`` of a time the drive torque is at
+    zero - within max(eps, rel * its range) of it, or changing sign between two
+    samples - where a dead zone is crossed or its contact lost; episodes: how many
+    separate visits to zero."""
+    t = np.asarray(t, float)
+    tau = np.asarray(tau, float)
+    if len(t) < 2:
+        return np.zeros(len(t), bool), 0
+    thr = max(eps, rel * float(tau.max() - tau.min()))
+    at0 = np.abs(tau) <= thr
+    at0[1:] |= np.sign(tau[1:]) * np.sign(tau[:-1]) < 0
+    episodes = int(at0[0]) + int(np.sum(at0[1:] & ~at0[:-1]))
+    dt = float(np.median(np.diff(t)))
+    w = int(round(half / dt))
+    mask = np.convolve(at0.astype(float), np.ones(2 * w + 1), mode="same") > 0.5 if w > 0 else at0
+    return mask, episodes
+
+
+def effect_visibility(kind, t, with_T, without_T, noise_T, fs, *, torsional_hz=None, tau=None):
+    """How visible one drive effect is at one load cell in one record: the
+    difference ``with_T - without_T`` of the truth simulated with and without it,
+    against the measurement error ``noise_T`` the benchmark injected. Overall
+    (whitened SNR over all frequencies, rms) and where the effect acts:
+    compliance - the band f_t (1 -+ BAND_REL); backlash - windows of
+    +-REVERSAL_WINDOW_S around the reversals of the drive torque ``tau`` (the
+    difference and the error both masked to them)."""
+    delta = np.asarray(with_T, float) - np.asarray(without_T, float)
+    noise = np.asarray(noise_T, float)
+    snr_all, d_all, n_all = whitened_snr(delta, noise, fs)
+    out = {"delta_rms_N": float(np.sqrt(np.mean(delta ** 2))), "noise_rms_N": float(np.sqrt(np.mean(noise ** 2))),
+           "snr_all": snr_all}
+    if kind == "compliance":
+        band = (torsional_hz * (1 - BAND_REL), torsional_hz * (1 + BAND_REL))
+        snr, d, nn = whitened_snr(delta, noise, fs, band)
+        out.update(where=f"{band[0]:.3g}-{band[1]:.3g} Hz", snr_where=snr, delta_rms_where_N=d,
+                   noise_rms_where_N=nn)
+    elif kind == "backlash":
+        mask, episodes = near_zero_windows(t, tau) if tau is not None else (np.zeros(len(t), bool), 0)
+        if mask.any():
+            # the error inside the windows is the noise the masked difference is seen in;
+            # its spectrum (not the masked one) is the per-bin noise power
+            snr, _, _ = whitened_snr(np.where(mask, delta, 0.0), noise, fs)
+            d = float(np.sqrt(np.mean(delta[mask] ** 2)))
+            nn = float(np.sqrt(np.mean(noise[mask] ** 2)))
+        else:
+            snr = d = nn = 0.0
+        out.update(where=f"{episodes} visits of the drive torque to zero (+-{REVERSAL_WINDOW_S:g} s), "
+                         f"{100 * float(mask.mean()):.0f} % of the record", snr_where=snr,
+                   delta_rms_where_N=d, noise_rms_where_N=nn, reversals=episodes, window_share=float(mask.mean()))
+    else:
+        raise ValueError(f"not a drive effect kind: {kind!r}")
+    return out
+
+
+def _combine(per):
+    """Detectability over load cells and fit runs: SNRs add in quadrature (independent errors)."""
+    snr = math.sqrt(sum(v["snr_where"] ** 2 for v in per))
+    snr_all = math.sqrt(sum(v["snr_all"] ** 2 for v in per))
+    # detectable: the effect's own signature (where it acts) stands out of the error; visible
+    # overall only: the data differ (e.g. a shaft changing how run-out passes) but not there
+    return {"snr_where": snr, "snr_all": snr_all, "threshold": DETECT_SNR, "detectable": bool(snr >= DETECT_SNR),
+            "visible_overall": bool(snr_all >= DETECT_SNR)}
+
+
+def _layout_without(truth, line_doc, line_path, index):
+    """Set block of the truth layout without its effect ``index`` (a drive effect):
+    the drive removed, the element's inertia back at its (parameter-drawn) total."""
+    from types import SimpleNamespace
+    e = truth["effects"][index]
+    eff = B.Effect(**{k: e[k] for k in ("kind", "element", "C_m", "psi_rad", "drive", "inertia_shift") if k in e})
+    model = TruthModel(**truth["model"])
+    pset, tdoc = param_set(model, line_doc)
+    s = dict(truth["set"])
+    for k in B.truth_set(SimpleNamespace(effects=[eff]), tdoc):
+        if k in pset:
+            s[k] = pset[k]
+        else:
+            s.pop(k, None)
+    return {"base": str(Path(line_path).resolve()), "set": s}
+
+
+def drive_detectability(truth, folder, *, simulate=None):
+    """For each hidden drive effect of a case: simulate the truth with and without
+    it (the truth engine, :func:`simulate_truth`) in every fit run, regenerate the
+    measurement error the case injected (same seed, :func:`measure`) and compare
+    (:func:`effect_visibility`). Returns {effect index: record}; the record's
+    ``detectable`` is the combined SNR where the effect acts >= DETECT_SNR."""
+    import tempfile
+    import yaml
+    from webline.orchestrator.layout import load_system
+    simulate = simulate or simulate_truth
+    folder = Path(folder)
+    line_path = folder / "blind" / "line.yaml"
+    line_doc = yaml.safe_load(line_path.read_text())
+    facts = B.line_facts(line_path)
+    # the folder's own truth layout (the recorded path is where the case was made)
+    truth_layout = folder / "truth" / "truth_layout.yaml"
+    if not truth_layout.exists():
+        truth_layout = Path(truth["truth_layout"])
+    out = {}
+    fields = set(IRunSpec.__dataclass_fields__)
+    with tempfile.TemporaryDirectory() as tmp:
+        for i, e in enumerate(truth["effects"]):
+            if e["kind"] not in B.DRIVE_KINDS:
+                continue
+            wo = B.write_yaml(Path(tmp) / f"without{i}.yaml", _layout_without(truth, line_doc, line_path, i))
+            per, runs = [], []
+            for r in truth["runs"]:
+                if r["holdout"]:
+                    continue
+                run = IRunSpec(**{k: v for k, v in r["spec"].items() if k in fields})
+                t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
+                ov = B._overrides(r["truth_conditions"])
+                res = simulate(load_system(truth_layout, ov), t)
+                res0 = simulate(load_system(wo, ov), t)
+                tt = np.asarray(res.time, float)
+                settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)
+                rng = np.random.default_rng(run.seed)
+                col = f"{e['element']}_speed_pi.tau"
+                tau = np.asarray(res[col], float)[settle] if col in res else None
+                rec = {"run": r["name"], "sensors": {}}
+                for lc in sorted(facts["_sensors"]):
+                    y = np.asarray(res[f"{lc}.T"], float)
+                    m, _ = measure(tt, y, run, rng)  # the same draws as the case's data
+                    v = effect_visibility(e["kind"], tt[settle], y[settle], np.asarray(res0[f"{lc}.T"], float)[settle],
+                                          (m - y)[settle], run.fs_hz, tau=tau,
+                                          torsional_hz=(e.get("drive") or {}).get("torsional_hz"))
+                    rec["sensors"][lc] = v
+                    per.append(v)
+                runs.append(rec)
+            out[i] = {**_combine(per), "runs": runs}
+    return out
+
+
+def add_detectability(folder, *, simulate=None):
+    """Record :func:`drive_detectability` in the case's truth/truth.json (each
+    drive effect's ``detectable``); returns the updated truth record."""
+    p = Path(folder) / "truth" / "truth.json"
+    truth = json.loads(p.read_text())
+    for i, rec in drive_detectability(truth, folder, simulate=simulate).items():
+        truth["effects"][i]["detectable"] = rec
+    p.write_text(json.dumps(truth, indent=1))
+    return truth

@@ -1,0 +1,205 @@
+"""Detectability of a hidden drive effect in the benchmark's family "independent"
+(diagnosis.benchmark_independent.drive_detectability): the truth simulated with
+and without the effect, the difference against the measurement error the case
+injected. Known answers: a difference of zero is never detectable, a strong one
+where the effect acts always is, and one outside its band or without a torque
+reversal does not count."""
+import math
+
+import numpy as np
+import pytest
+
+from webline.diagnosis import benchmark as B
+from webline.diagnosis import benchmark_independent as BI
+
+
+def _noise(n, fs, sigma, seed=1):
+    return np.random.default_rng(seed).normal(0.0, sigma, n)
+
+
+FS, T = 250.0, 60.0
+t = np.arange(0.0, T, 1.0 / FS)
+
+
+def test_whitened_snr_of_a_sine_in_white_noise_is_the_matched_filter_one():
+    # known signal d in white noise of variance s^2: SNR^2 = sum(d^2) / s^2 = N A^2 / 2 / s^2
+    s, A, f = 0.3, 0.02, 5.0
+    d = A * np.sin(2 * math.pi * f * t)
+    snr, d_rms, n_rms = BI.whitened_snr(d, _noise(len(t), FS, s), FS)
+    expect = math.sqrt(len(t) * A * A / 2) / s
+    # the noise power per bin is estimated from one realisation smoothed over 0.5 Hz (61 bins):
+    # its relative error ~ 1/sqrt(61) = 13 % in power, half that in the SNR
+    assert snr == pytest.approx(expect, rel=0.15)
+    assert d_rms == pytest.approx(A / math.sqrt(2), rel=1e-3) and n_rms == pytest.approx(s, rel=0.02)
+
+
+def test_compliance_visibility_counts_only_its_band():
+    noise = _noise(len(t), FS, 0.3)
+    y0 = np.full(len(t), 100.0)
+    kw = dict(torsional_hz=5.0)
+    # no difference: nothing to see
+    v0 = BI.effect_visibility("compliance", t, y0, y0, noise, FS, **kw)
+    assert v0["snr_where"] == 0.0 and v0["snr_all"] == 0.0 and not BI._combine([v0])["detectable"]
+    # a 0.1 N ringing at the torsional mode in 0.3 N of noise over 60 s: SNR ~ 29
+    v1 = BI.effect_visibility("compliance", t, y0 + 0.1 * np.sin(2 * math.pi * 5.0 * t), y0, noise, FS, **kw)
+    assert v1["snr_where"] > 20 and BI._combine([v1])["detectable"]
+    # as strong, but at 15 Hz (outside 5 Hz -+ 30 %): visible overall, not where the effect acts
+    v2 = BI.effect_visibility("compliance", t, y0 + 0.1 * np.sin(2 * math.pi * 15.0 * t), y0, noise, FS, **kw)
+    assert v2["snr_all"] > 20 and v2["snr_where"] < 2 and not BI._combine([v2])["detectable"]
+    # SNRs of independent records add in quadrature: 4 records of SNR 3 make 6
+    c = BI._combine([{"snr_where": 3.0, "snr_all": 3.0}] * 4)
+    assert c["snr_where"] == pytest.approx(6.0) and c["detectable"]
+
+
+def test_backlash_visibility_needs_a_torque_reversal():
+    noise = _noise(len(t), FS, 0.3, seed=2)
+    y0 = np.full(len(t), 100.0)
+    # a 1 N transient decaying in 50 ms after the torque crosses zero at 30 s: sum(d^2) =
+    # FS * 0.05 / 2 = 6.25 samples' worth, SNR = sqrt(6.25) / 0.3 = 8.3 in white noise
+    bump = np.where(t >= 30.0, np.exp(-(t - 30.0) / 0.05), 0.0)
+    tau = np.where(t < 30.0, 0.5, -0.5)
+    v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=tau)
+    assert v["reversals"] == 1 and v["snr_where"] == pytest.approx(8.33, rel=0.15)
+    assert BI._combine([v])["detectable"]
+    # the same difference with a torque that never changes sign (a drive held by the web)
+    v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=np.full(len(t), 0.5))
+    assert v["reversals"] == 0 and v["snr_where"] == 0.0 and not BI._combine([v])["detectable"]
+    # a torque that comes down to zero without changing sign opens the dead zone as well
+    tau = np.where(np.abs(t - 30.0) < 0.1, 0.0, 0.5)
+    v = BI.effect_visibility("backlash", t, y0 + bump, y0, noise, FS, tau=tau)
+    assert v["reversals"] == 1 and v["snr_where"] == pytest.approx(8.33, rel=0.15)
+    mask, k = BI.near_zero_windows(t, tau)
+    assert k == 1 and mask.mean() == pytest.approx(1.2 / T, abs=2.0 / FS / T)   # 0.2 s + 2 x 0.5 s
+
+
+def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
+    """A compliance case made by the generator: the truth engine run with and without
+    the shaft, the measurement error regenerated from the case's seed (its rms is the
+    one the case recorded), the layout without it has the inertia back on the element."""
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    cases = BI.draw_cases(9, seed=0, layout_doc=doc, facts=facts)
+    case = next(c for c in cases if c.category == "compliance")
+    for r in case.runs:
+        r.duration_s = 3.0
+    folder = tmp_path / "independent" / "cases" / case.id
+    truth = BI.make_case(case, folder, doc)
+    i = next(k for k, e in enumerate(truth["effects"]) if e["kind"] == "compliance")
+    det = truth["effects"][i]["detectable"]
+    assert det["threshold"] == BI.DETECT_SNR and isinstance(det["detectable"], bool)
+    fit = [r for r in truth["runs"] if not r["holdout"]]
+    assert [r["run"] for r in det["runs"]] == [r["name"] for r in fit]
+    for rr, r in zip(det["runs"], fit):
+        for lc, v in rr["sensors"].items():
+            assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=1e-9)
+            assert v["delta_rms_N"] > 0 and math.isfinite(v["snr_where"])
+    el = truth["effects"][i]["element"]
+    wo = BI._layout_without(truth, doc, folder / "blind" / "line.yaml", i)["set"]
+    pset, _ = BI.param_set(BI.TruthModel(**truth["model"]), doc)
+    assert f"drives.speed_loops.{el}.drive" in truth["set"] and f"drives.speed_loops.{el}.drive" not in wo
+    tset = B.truth_set(case, BI.param_set(case.model, doc)[1])
+    moved = [k for k in pset if k.startswith(f"path.{el}.") and k in tset]
+    assert moved and all(wo[k] == pset[k] != truth["set"][k] for k in moved)
+    # the scorer: recall over all drive effects and over the detectable ones
+    t2 = {"id": "x", "effects": [dict(truth["effects"][i], detectable={"detectable": True}),
+                                 {"kind": "backlash", "element": "rewind", "detectable": {"detectable": False}}],
+          "runs": truth["runs"]}
+    rep = {"effects": [{"element": el, "kind": "compliance", "candidates": [el]}]}
+    s = BI.target_scores([{"truth": t2, "report": rep}])
+    assert {k: s["drive"][k] for k in ("true", "matched", "detectable", "matched_detectable")} == \
+        {"true": 2, "matched": 1, "detectable": 1, "matched_detectable": 1}
+    assert s["drive"]["recall"] == 0.5 and s["drive"]["recall_detectable"] == 1.0
+    assert s["recall"] == 0.5  # the headline stays over all effects
+    row = next(r for r in BI.target_rows(s) if r[3] == "drive_recall")
+    assert "all: 50 % (1/2); detectable only: 100 % (1/1)" in row[1]
+
+
+def test_summary_counts_detectable_drive_effects_and_says_so():
+    """The own family's summary and table: a recorded measurement decides, else a
+    backlash counts as detectable where its drive torque reverses, a compliance
+    without a measurement is not known (and gets no note)."""
+    def truth(i, effects, torque=None):
+        return {"id": f"c{i}", "category": "x", "effects": effects,
+                "runs": [{"name": "run1", "holdout": False, "fundamental_hz": {},
+                          "drive_torque": torque or {}, "sensors": {}}]}
+
+    bl = {"kind": "backlash", "element": "sw_leader", "indistinguishable": ["sw_leader"]}
+    co = {"kind": "compliance", "element": "sw_leader", "indistinguishable": ["sw_leader"]}
+    found = {"effects": [{"element": "sw_leader", "kind": "compliance", "candidates": ["sw_leader"]}]}
+    cases = [
+        (truth(1, [dict(co, detectable={"detectable": True})]), found),
+        (truth(2, [dict(co, detectable={"detectable": False})]), {"effects": []}),
+        (truth(3, [bl], {"sw_leader": {"min_Nm": -1.0, "max_Nm": 1.0}}), {"effects": []}),   # reverses
+        (truth(4, [bl], {"sw_leader": {"min_Nm": 0.5, "max_Nm": 1.0}}), {"effects": []}),    # never
+        (truth(5, [dict(bl, detectable={"detectable": False})], {"sw_leader": {"min_Nm": -1.0, "max_Nm": 1.0}}),
+         {"effects": []}),  # the measurement wins over the reversal
+    ]
+    results = [{"truth": t, "report": r, "score": B.score_case(t, r), "gap": None, "wall_s": 1.0} for t, r in cases]
+    s = B.summarize(results)
+    assert s["drive_detectable"]["compliance"] == {"true": 1, "matched": 1, "unknown": 0}
+    assert s["drive_detectable"]["backlash"] == {"true": 1, "matched": 0, "unknown": 0}
+    assert s["backlash_with_torque_reversal"] == s["drive_detectable"]["backlash"]
+    md = B.markdown(s)
+    assert "| compliance: precision / recall | 100 % (1/1) / 50 % (1/2); 1 of the 2 hidden detectable" in md
+    assert "| backlash: precision / recall | - (0/0) / 0 % (0/3); 1 of the 3 hidden detectable" in md
+    # a compliance without a measurement: not known, no note
+    t6 = truth(6, [co])
+    s6 = B.summarize([{"truth": t6, "report": found, "score": B.score_case(t6, found), "gap": None, "wall_s": 1.0}])
+    assert s6["drive_detectable"]["compliance"]["unknown"] == 1
+    assert "hidden detectable" not in B.markdown(s6)
+
+
+def test_own_family_records_detectability_of_its_drive_effects(tmp_path):
+    """The family "own" measures detectability the same way (truth with and without
+    the effect, against the white noise it added): a backlash whose drive torque never
+    reverses (on the unwind, held back by the web) changes next to nothing; one on the
+    speed master, whose torque does reverse in the speed ramp, stands far out."""
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    cases = {c.id: c for c in B.draw_cases(24, seed=0, layout_doc=doc, facts=facts)}
+    got = {}
+    for cid in ("c06", "c18"):  # rewind backlash / sw_leader backlash (the draw's, pinned by seed 0)
+        case = cases[cid]
+        assert [(e.kind, e.element) for e in case.effects] == [("backlash", "rewind" if cid == "c06" else "sw_leader")]
+        truth = B.make_case(case, tmp_path / cid, doc)
+        det = truth["effects"][0]["detectable"]
+        fit = [r for r in truth["runs"] if not r["holdout"]]
+        for rr, r in zip(det["runs"], fit):
+            for lc, v in rr["sensors"].items():
+                # the same noise draw: the case records it over the whole record, the visibility
+                # over the settled window (1 s of 10 s less): equal within the rms's sampling error
+                assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=0.03)
+        got[cid] = det
+    assert not got["c06"]["detectable"] and got["c06"]["snr_where"] == 0.0
+    assert got["c18"]["detectable"] and got["c18"]["snr_where"] > 10 * BI.DETECT_SNR
+
+
+
+def test_rescore_measures_detectability_of_cases_made_before(tmp_path):
+    """A case folder whose truth.json has no ``detectable`` (made before it was
+    measured) gets it on a rescore, the same numbers as when the case is made."""
+    import json
+    from webline.diagnosis import benchmark_cmd
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    case = next(c for c in BI.draw_cases(9, seed=0, layout_doc=doc, facts=facts) if c.category == "compliance")
+    for r in case.runs:
+        r.duration_s = 3.0
+    folder = tmp_path / "independent" / "cases" / case.id
+    made = BI.make_case(case, folder, doc)
+    p = folder / "truth" / "truth.json"
+    old = json.loads(p.read_text())
+    for e in old["effects"]:
+        e.pop("detectable", None)
+    p.write_text(json.dumps(old))
+    (folder / "diagnosis").mkdir()
+    (folder / "diagnosis" / "report.json").write_text(json.dumps({"effects": []}))
+    out = tmp_path / "res.json"
+    assert benchmark_cmd.main(["--family", "independent", "--rescore", "--out", str(tmp_path),
+                               "--results", str(out)]) == 0
+    new = json.loads(p.read_text())
+    i = next(k for k, e in enumerate(made["effects"]) if e["kind"] == "compliance")
+    assert new["effects"][i]["detectable"]["snr_where"] == pytest.approx(made["effects"][i]["detectable"]["snr_where"],
+                                                                           rel=1e-9)
+    ts = json.loads(out.read_text())["families"]["independent"]["target_scores"]
+    assert ts["drive"]["true"] == 1 and ts["drive"]["unknown"] == 0
