@@ -481,7 +481,7 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
         sims = sim_fit(with_all(alt0, dict(zip([c.element for c in cands], Xs))), f"structure {name} {label}")
         starts.append((regress.sse(d, fit, sims), Xs, sims))
     e, Xs, sims = min(starts, key=lambda x: x[0])
-    Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=2, sims=sims,
+    Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=1, sims=sims,
                                             label=f"structure {name}")
     return dict(zip([c.element for c in cands], Xs)), sims2
 
