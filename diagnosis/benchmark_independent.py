@@ -518,6 +518,9 @@ def worse_sensors(report, rtol=WORSE_RTOL):
 def _not_identifiable(eff, order):
     if eff.get("identifiable") is False or eff.get("amplitude_identifiable") is False:
         return True
+    # where report.json says it: the effect's amplitude range over the forms and runs
+    if (eff.get("amplitude_uncertainty") or {}).get("identifiable") is False:
+        return True
     for h in eff.get("harmonics") or []:
         if int(h.get("order", -1)) == order and h.get("identifiable") is False:
             return True

@@ -145,7 +145,7 @@ def to_X(coef, cols, n_cands, H):
     return Xs
 
 
-def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="time-domain fit"):
+def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="time-domain fit", drop_rounds=3):
     """Polish the coefficients ``Xs`` of ``cands`` (same order as ``orders``) in the
     layout ``base`` on the fit runs ``ctxs``: responses at the current estimate,
     a least-squares step, halved while the simulated residual does not fall.
@@ -159,7 +159,7 @@ def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="ti
             return Xs, None, np.inf, []
     e = sse(d, ctxs, sims)
     hist = [e]
-    Xs, sims, e = drop_harmful_orders(d, base, cands, Xs, ctxs, sims, e, label)
+    Xs, sims, e = drop_harmful_orders(d, base, cands, Xs, ctxs, sims, e, label, rounds=drop_rounds)
     for it in range(steps):
         resp, cols = responses(d, base, cands, Xs, orders, ctxs, sims, label=f"{label} {it + 1}")
         if resp is None:

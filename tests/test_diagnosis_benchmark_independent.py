@@ -248,7 +248,9 @@ def test_target_scores_on_hand_made_reports():
                      "holdout": _gap(0.5, 0.3, 0.2, 0.21)}}
     # c3: out-of-round found, amplitude 50 % off but flagged not identifiable; closed share 0.5
     e3 = _eff("unwind", "out_of_round", 0.5, 3e-4)
-    e3["harmonics"][0]["identifiable"] = False
+    # as report.json says it (diagnosis/structure.py: range over forms and runs)
+    e3["amplitude_uncertainty"] = {"dominant_order": 1, "amplitude": 3e-4, "range": [1e-4, 3e-4],
+                                   "identifiable": False}
     c3 = {"truth": _truth([_ecc("unwind", [2e-4], "out_of_round")], [_run("r1", False, fund, 0.2, 1.0)]),
           "report": {"effects": [e3], "holdout": _gap(0.6, 0.4, 0.3, 0.3)}}
     # c4: noise only, 3 records one ramped, a periodic source invented
