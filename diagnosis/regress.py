@@ -302,6 +302,34 @@ def select(d, ranked, orders, ctxs):
         gain = (e_b - best_pair[4]) / excess
         log.info("  same frequency: %s alone leaves %.4g, with %s %.4g (noise %.4g: removes %.0f %% of the excess)",
                  cands[b].element, e_b, cands[best_pair[1]].element, best_pair[4], noise, 100 * gain)
-        if gain >= PAIR_GAIN:
-            out["pair"] = best_pair
+        floor = 0.5 * Z_ORDER * sum(noise_drop(d, ctxs, cands[best_pair[1]], j)
+                                    for j in {cols[m][1] for m in per[best_pair[1]]})
+        if gain >= PAIR_GAIN and e_b - best_pair[4] >= floor:
+            out["pair"] = _verify_pair(d, cands, best_pair, per, resp, cols, ctxs, noise, single[b][1])
     return out
+
+
+def _verify_pair(d, cands, pair, per, resp, cols, ctxs, noise, Xb):
+    """The pair as the linear fit at zero eccentricity proposes it, if it still holds
+    once the first element's fit is polished (Gauss-Newton, simulated): what a large
+    eccentricity's nonlinear response leaves is not a second source. The second
+    element (linear from zero) must then remove PAIR_GAIN of the excess left and
+    more than fitting noise with its coefficients would (Z_ORDER per order). None if not."""
+    b, i, _, _, _ = pair
+    H = d.opt.harmonics
+    base = d.model.copy_doc()
+    ords = [sorted({cols[m][1] for m in per[b]})]
+    Xs, sims, e_b, _ = gauss_newton(d, base, [cands[b]], [Xb], ords, ctxs, steps=2, label="pair check",
+                                    drop_rounds=0)
+    if sims is None:
+        return None
+    coef, _, e2 = solve(d, ctxs, resp, cols, sims, per[i])
+    drop = e_b - e2
+    excess = max(e_b - noise, 1e-12 * max(e_b, 1e-300))
+    floor = 0.5 * Z_ORDER * sum(noise_drop(d, ctxs, cands[i], j) for j in {cols[m][1] for m in per[i]})
+    log.info("  pair check: %s polished leaves %.4g; %s removes %.4g more (%.0f %% of the excess; noise "
+             "would give %.3g)", cands[b].element, e_b, cands[i].element, drop, 100 * drop / excess, floor)
+    if drop < PAIR_GAIN * excess or drop < floor:
+        return None
+    Xi = to_X(coef, cols, len(cands), H)[i]
+    return (b, i, Xs[0], Xi, e2)
