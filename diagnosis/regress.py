@@ -320,7 +320,7 @@ def _verify_pair(d, cands, pair, per, resp, cols, ctxs, noise, Xb):
     base = d.model.copy_doc()
     ords = [sorted({cols[m][1] for m in per[b]})]
     Xs, sims, e_b, _ = gauss_newton(d, base, [cands[b]], [Xb], ords, ctxs, steps=2, label="pair check",
-                                    drop_rounds=0)
+                                    drop_rounds=1)
     if sims is None:
         return None
     coef, _, e2 = solve(d, ctxs, resp, cols, sims, per[i])
