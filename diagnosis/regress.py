@@ -304,7 +304,10 @@ def select(d, ranked, orders, ctxs):
                  cands[b].element, e_b, cands[best_pair[1]].element, best_pair[4], noise, 100 * gain)
         floor = 0.5 * Z_ORDER * sum(noise_drop(d, ctxs, cands[best_pair[1]], j)
                                     for j in {cols[m][1] for m in per[best_pair[1]]})
-        if gain >= PAIR_GAIN and e_b - best_pair[4] >= floor:
+        # judged on the linear fit only against noise: what a large first source's nonlinear
+        # response leaves can hide or fake a second one, so the share is judged once the
+        # first is polished (_verify_pair)
+        if e_b - best_pair[4] >= floor:
             out["pair"] = _verify_pair(d, cands, best_pair, per, resp, cols, ctxs, noise, single[b][1])
     return out
 
