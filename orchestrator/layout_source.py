@@ -17,6 +17,7 @@ list of named mappings (``path``), by ``name``: ``path.unwind.radius``. A key
 whose first part names a path element is taken as under ``path``
 (``unwind.radius`` = ``path.unwind.radius``).
 """
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -84,9 +85,34 @@ def _loc(path, node):
     return Location(str(path), node.start_mark.line + 1)
 
 
+_PARSED = {}   # (resolved path, mtime_ns, size) -> located data, as parsed
+
+
 def load_yaml(path, text=None):
-    """The located data of one YAML file (no ``base`` handling). Raises LayoutError."""
+    """The located data of one YAML file (no ``base`` handling). Raises LayoutError.
+
+    A file is parsed once per version (path, modification time, size) and handed
+    out as a copy: a diagnosis or a sweep builds hundreds of variants on one base
+    layout, and parsing it was a tenth of their wall time."""
     path = Path(path)
+    if text is None:
+        try:
+            st = path.stat()
+            key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+        except OSError:
+            key = None
+        if key is not None and key in _PARSED:
+            return copy.deepcopy(_PARSED[key])
+        data = _load_yaml_text(path, None)
+        if key is not None:
+            if len(_PARSED) > 64:
+                _PARSED.clear()
+            _PARSED[key] = copy.deepcopy(data)
+        return data
+    return _load_yaml_text(path, text)
+
+
+def _load_yaml_text(path, text):
     if text is None:
         try:
             text = path.read_text()
