@@ -322,11 +322,10 @@ def screen(d):
                  cur_score)
 
     alts = alternatives(d)[:max(0, d.opt.max_structures)]
-    # the full set is screened in other forms only when something else makes the
-    # form suspect: a secondary source alone asks whether one source and a form
-    # explain what the two explain in the layout's form (already checked)
-    only_sec = len(why) == len(sec)
-    for name, desc, sets in ([] if only_sec else alts):
+    # the full set is screened in the other forms too: a second source's amplitude is
+    # what the layout's form needs to carry the first source's lines to the other zone,
+    # and in the line's form it can be a tenth of that (independent c05: 0.88 mm for 0.076)
+    for name, desc, sets in alts:
         stage_a_one(name, desc, sets)
     if sec_fes:  # the parsimonious set: without the secondary sources, in the layout's form and each other
         stage_a_one("as modelled", "the layout's own form", {}, effs_p)
