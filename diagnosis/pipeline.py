@@ -1112,10 +1112,14 @@ class Diagnosis:
         best = [fe["ranked"][0] for fe in self.final_effects]
         cands = [b["cand"] for b in best]
         orders = [[j + 1 for j in np.flatnonzero(np.abs(b["X"]) > 0)] for b in best]
+        last = {}
         Xs, sims, e, hist = regress.gauss_newton(self, doc, cands, [b["X"] for b in best], orders,
-                                                 self.fit_ctx(), steps=steps, label="polish")
-        for b, X in zip(best, Xs):
+                                                 self.fit_ctx(), steps=steps, label="polish", last=last)
+        sig = (regress.standard_errors(self, self.fit_ctx(), last["resp"], last["cols"], cands, Xs)
+               if last else [None] * len(best))
+        for b, X, sg in zip(best, Xs, sig):
             b["X"] = X
+            b["X_sigma"] = sg
 
     def _harmonics_left(self, k, fit, sims):
         """Harmonics [(run, sensor), order] of data minus simulation on ``k``'s angle."""

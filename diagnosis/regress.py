@@ -145,7 +145,36 @@ def to_X(coef, cols, n_cands, H):
     return Xs
 
 
-def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="time-domain fit", drop_rounds=3):
+def standard_errors(d, ctxs, resp, cols, cands, Xs):
+    """Per candidate, the standard error (m) of each fitted order's amplitude |X_j|:
+    the least-squares covariance (A^T A)^-1 of the weighted regressors times the
+    noise variance at that order's frequency (:func:`noise_drop` / 2 per regressor),
+    projected on the direction of X_j. Orders not fitted get NaN."""
+    H = d.opt.harmonics
+    idx = [m for m, (i, j, _) in enumerate(cols) if abs(Xs[i][j - 1]) > 0]
+    out = [np.full(H, np.nan) for _ in cands]
+    if not idx:
+        return out
+    AtA = np.zeros((len(idx), len(idx)))
+    for c in ctxs:
+        w = _weights(c)
+        for s in c.sensors:
+            A = resp[c.name][s][idx][:, c.mask] * w[s]
+            AtA += A @ A.T
+    cov = np.linalg.pinv(AtA)
+    pos = {cols[m]: a for a, m in enumerate(idx)}
+    for (i, j, ph), a in pos.items():
+        b = pos.get((i, j, 1j))
+        if ph != 1.0 or b is None:
+            continue
+        u = Xs[i][j - 1] / abs(Xs[i][j - 1])          # |X| changes along X's own direction
+        var = u.real ** 2 * cov[a, a] + u.imag ** 2 * cov[b, b] + 2 * u.real * u.imag * cov[a, b]
+        out[i][j - 1] = float(np.sqrt(max(var, 0.0) * 0.5 * noise_drop(d, ctxs, cands[i], j)))
+    return out
+
+
+def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="time-domain fit", drop_rounds=3,
+                 last=None):
     """Polish the coefficients ``Xs`` of ``cands`` (same order as ``orders``) in the
     layout ``base`` on the fit runs ``ctxs``: responses at the current estimate,
     a least-squares step, halved while the simulated residual does not fall.
@@ -164,6 +193,8 @@ def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="ti
         resp, cols = responses(d, base, cands, Xs, orders, ctxs, sims, label=f"{label} {it + 1}")
         if resp is None:
             break
+        if last is not None:   # the latest regressors: the estimate's standard errors
+            last["resp"], last["cols"] = resp, cols
         coef, _, e_pred = solve(d, ctxs, resp, cols, sims)
         dX = to_X(coef, cols, len(cands), H)
         lam, accepted = 1.0, False

@@ -144,8 +144,7 @@ def _effects(d):
             "fundamental_hz": float(np.mean(fund_fit)) if fund_fit else None,
             "fundamental_by_run_hz": fund,
             "speed_scale_by_run": {c.name: c.kappa.get(k.key, 0.0) for c in fit},
-            "harmonics": [{"order": j + 1, "amplitude": float(abs(X[j])), "phase": float(np.angle(X[j]))}
-                          for j in range(len(X)) if abs(X[j]) > 0],
+            "harmonics": [_harmonic_entry(b, X, j) for j in range(len(X)) if abs(X[j]) > 0],
             "harmonics_unit": {"amplitude": "m", "phase": "rad"},
             "explained_share": b.get("share", score["share"]),
             "explained_share_of_residual": (b.get("share", score["share"]) * d.total_periodic / d.total_resid
@@ -166,6 +165,22 @@ def _effects(d):
         out.append(eff)
     for o in getattr(d, "other", []) or []:
         out.append({k: v for k, v in o.items() if not callable(v) and not k.startswith("_") and k != "line"})
+    return out
+
+
+# an order whose amplitude has a standard error above this share of itself spans more
+# than a factor 2 over its +-2 sigma interval: not identifiable from these runs
+SIGMA_SHARE = 1.0 / 3.0
+
+
+def _harmonic_entry(b, X, j):
+    """One order of an effect: amplitude (m), phase (rad) and, from the time-domain
+    fit, its standard error against the noise at that order's frequency."""
+    out = {"order": j + 1, "amplitude": float(abs(X[j])), "phase": float(np.angle(X[j]))}
+    sg = b.get("X_sigma")
+    if sg is not None and j < len(sg) and np.isfinite(sg[j]):
+        out["sigma"] = float(sg[j])
+        out["identifiable"] = bool(sg[j] <= SIGMA_SHARE * abs(X[j]))
     return out
 
 
