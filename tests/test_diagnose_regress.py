@@ -99,6 +99,10 @@ def test_time_domain_estimate_on_a_ramped_record(ramp_case):
     # linearisation left after the Gauss-Newton steps
     assert h[1] == pytest.approx(HIDDEN["C"][0], rel=0.02), h
     assert h[2] == pytest.approx(HIDDEN["C"][1], rel=0.10), h
+    # its standard error: sigma_noise / (|G| sqrt(N/2)) ~ 0.05 / (1e4 * 42) ~ 1e-7 m, within a
+    # decade either way (|G| is known to a factor of a few from the line's parameters)
+    s1 = next(x for x in eff[0]["harmonics"] if x["order"] == 1)
+    assert 1e-8 < s1["sigma"] < 1e-6 and s1["identifiable"], s1
     gap = rep["gap"]["lc.T"]
     assert gap["refined"]["nrmse"] < 0.5 * gap["nominal"]["nrmse"]
     assert math.isfinite(gap["refined"]["nrmse"])
