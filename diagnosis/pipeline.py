@@ -1115,8 +1115,8 @@ class Diagnosis:
         last = {}
         Xs, sims, e, hist = regress.gauss_newton(self, doc, cands, [b["X"] for b in best], orders,
                                                  self.fit_ctx(), steps=steps, label="polish", last=last)
-        sig = (regress.standard_errors(self, self.fit_ctx(), last["resp"], last["cols"], cands, Xs)
-               if last else [None] * len(best))
+        sig = (regress.standard_errors(self, self.fit_ctx(), last["resp"], last["cols"], cands, Xs, sims)
+               if last and sims is not None else [None] * len(best))
         for b, X, sg in zip(best, Xs, sig):
             b["X"] = X
             b["X_sigma"] = sg

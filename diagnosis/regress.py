@@ -145,11 +145,14 @@ def to_X(coef, cols, n_cands, H):
     return Xs
 
 
-def standard_errors(d, ctxs, resp, cols, cands, Xs):
+def standard_errors(d, ctxs, resp, cols, cands, Xs, sims):
     """Per candidate, the standard error (m) of each fitted order's amplitude |X_j|:
     the least-squares covariance (A^T A)^-1 of the weighted regressors times the
-    noise variance at that order's frequency (:func:`noise_drop` / 2 per regressor),
-    projected on the direction of X_j. Orders not fitted get NaN."""
+    variance of what the fit leaves (``sims``: the refined simulation) at that
+    order's frequency (local PSD level x fs / 2 per regressor, the largest over runs
+    and sensors), projected on the direction of X_j. Orders not fitted get NaN.
+    The floor before the fit would do on a steady record; over a ramp the effect's
+    own lines smear into it."""
     H = d.opt.harmonics
     idx = [m for m, (i, j, _) in enumerate(cols) if abs(Xs[i][j - 1]) > 0]
     out = [np.full(H, np.nan) for _ in cands]
@@ -162,6 +165,21 @@ def standard_errors(d, ctxs, resp, cols, cands, Xs):
             A = resp[c.name][s][idx][:, c.mask] * w[s]
             AtA += A @ A.T
     cov = np.linalg.pinv(AtA)
+    left = {}
+    for c in ctxs:
+        for s in c.sensors:
+            r = _periodic(c, c.meas[s] - sims[c.name].columns[s])[c.mask]
+            left[c.name, s] = est.NoiseFloor(r, c.fs, median_hz=4.0)
+
+    def var_left(cand, j):
+        v = 0.0
+        for c in ctxs:
+            f = np.array([j * c.freq.get(cand.key, 0.0)])
+            for s in c.sensors:
+                S_med = max(float(np.median(c.floors[s].S)), 1e-300)
+                v = max(v, float(left[c.name, s](f)[0]) / S_med * 0.5 * c.fs)
+        return v
+
     pos = {cols[m]: a for a, m in enumerate(idx)}
     for (i, j, ph), a in pos.items():
         b = pos.get((i, j, 1j))
@@ -169,7 +187,7 @@ def standard_errors(d, ctxs, resp, cols, cands, Xs):
             continue
         u = Xs[i][j - 1] / abs(Xs[i][j - 1])          # |X| changes along X's own direction
         var = u.real ** 2 * cov[a, a] + u.imag ** 2 * cov[b, b] + 2 * u.real * u.imag * cov[a, b]
-        out[i][j - 1] = float(np.sqrt(max(var, 0.0) * 0.5 * noise_drop(d, ctxs, cands[i], j)))
+        out[i][j - 1] = float(np.sqrt(max(var, 0.0) * var_left(cands[i], j)))
     return out
 
 
