@@ -729,9 +729,7 @@ class Diagnosis:
             # explain the same energy; the one that needs less is the likelier)
             ranked.sort(key=lambda r: (round(r["misfit"], 2), r["score"]["lowest_order"],
                                        float(np.linalg.norm(r["X"]))))
-            if self.opt.estimator == "time" and self._select_time_domain(ranked, eff, fit):
-                pass
-            else:
+            if not (self.opt.estimator == "time" and self._select_time_domain(ranked, eff, fit)):
                 self._verify_ties(ranked, fit)
                 self.final_effects.append({"ranked": ranked, "eff": eff})
                 self._split_same_frequency(ranked, eff, fit)

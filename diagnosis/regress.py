@@ -43,8 +43,7 @@ MAX_RANKED = 4       # candidates of one effect regressed (best harmonic pattern
 
 def _doc(d, base, cands, Xs):
     for k, X in zip(cands, Xs):
-        doc_X = np.asarray(X, complex)
-        base = d.with_effect(base, k, doc_X)
+        base = d.with_effect(base, k, np.asarray(X, complex))
     return base
 
 
@@ -114,11 +113,9 @@ def responses(d, base, cands, Xs, orders, ctxs, sims0, label="response"):
     return out, cols
 
 
-def solve(d, ctxs, resp, cols, sims0, subset=None):
-    """Weighted least squares of the periodic residual (data - sims0) on the response
-    columns (``subset``: indices of the columns used). Returns (coef, sse_before, sse_after)
-    with coef in metres per column (zero outside the subset)."""
-    idx = list(range(len(cols))) if subset is None else list(subset)
+def _normal_equations(ctxs, resp, idx, sims0=None):
+    """A^T A of the weighted response columns ``idx`` over the fit samples and, with
+    ``sims0``, A^T y and y^T y of the weighted periodic residual data - sims0."""
     AtA = np.zeros((len(idx), len(idx)))
     Aty = np.zeros(len(idx))
     e0 = 0.0
@@ -126,10 +123,20 @@ def solve(d, ctxs, resp, cols, sims0, subset=None):
         w = _weights(c)
         for s in c.sensors:
             A = resp[c.name][s][idx][:, c.mask] * w[s]
-            y = _periodic(c, c.meas[s] - sims0[c.name].columns[s])[c.mask] * w[s]
             AtA += A @ A.T
-            Aty += A @ y
-            e0 += float(y @ y)
+            if sims0 is not None:
+                y = _periodic(c, c.meas[s] - sims0[c.name].columns[s])[c.mask] * w[s]
+                Aty += A @ y
+                e0 += float(y @ y)
+    return AtA, Aty, e0
+
+
+def solve(d, ctxs, resp, cols, sims0, subset=None):
+    """Weighted least squares of the periodic residual (data - sims0) on the response
+    columns (``subset``: indices of the columns used). Returns (coef, sse_before, sse_after)
+    with coef in metres per column (zero outside the subset)."""
+    idx = list(range(len(cols))) if subset is None else list(subset)
+    AtA, Aty, e0 = _normal_equations(ctxs, resp, idx, sims0)
     # an order a run cannot show (beyond its band) has a zero column: least squares, not solve
     x = np.linalg.lstsq(AtA, Aty, rcond=1e-12)[0]
     e1 = e0 - float(Aty @ x)
@@ -158,13 +165,7 @@ def standard_errors(d, ctxs, resp, cols, cands, Xs, sims):
     out = [np.full(H, np.nan) for _ in cands]
     if not idx:
         return out
-    AtA = np.zeros((len(idx), len(idx)))
-    for c in ctxs:
-        w = _weights(c)
-        for s in c.sensors:
-            A = resp[c.name][s][idx][:, c.mask] * w[s]
-            AtA += A @ A.T
-    cov = np.linalg.pinv(AtA)
+    cov = np.linalg.pinv(_normal_equations(ctxs, resp, idx)[0])
     left = {}
     for c in ctxs:
         for s in c.sensors:
@@ -194,8 +195,10 @@ def standard_errors(d, ctxs, resp, cols, cands, Xs, sims):
 def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="time-domain fit", drop_rounds=3,
                  last=None):
     """Polish the coefficients ``Xs`` of ``cands`` (same order as ``orders``) in the
-    layout ``base`` on the fit runs ``ctxs``: responses at the current estimate,
-    a least-squares step, halved while the simulated residual does not fall.
+    layout ``base`` on the fit runs ``ctxs``: first the orders that make the simulated
+    residual larger are dropped (``drop_rounds``), then per step the responses at the
+    current estimate, a least-squares step, quartered (up to twice) until the simulated
+    residual falls. ``last``: a dict that receives the latest responses (``resp``, ``cols``).
 
     Returns (Xs, sims, sse, history); the input estimate if no step helps."""
     H = d.opt.harmonics
