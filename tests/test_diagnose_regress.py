@@ -106,3 +106,29 @@ def test_time_domain_estimate_on_a_ramped_record(ramp_case):
     gap = rep["gap"]["lc.T"]
     assert gap["refined"]["nrmse"] < 0.5 * gap["nominal"]["nrmse"]
     assert math.isfinite(gap["refined"]["nrmse"])
+
+
+def test_per_run_estimates_of_one_run_out():
+    """A run-out estimated from each fit run alone (the layout's gains): M = G X per
+    sensor gives back X in each run; two runs a factor 3 apart are a disagreement far
+    beyond their noise, which the model-form screen turns into 'not identifiable'."""
+    from webline.diagnosis import structure
+
+    G = np.array([[2e4 + 1e3j], [5e3 - 2e3j], [1.5e4 + 0j], [4e3 + 4e3j]])   # N/m: run1 x2 sensors, run2 x2
+    X_run = {"run1": 300e-6 * np.exp(0.4j), "run2": 100e-6 * np.exp(0.4j)}
+    M = np.vstack([G[0:2] * X_run["run1"], G[2:4] * X_run["run2"]])
+    W = np.full(4, 1e5)                                   # 1 / S, S = 1e-5 N^2/Hz
+    runs = [SimpleNamespace(name=n, sensors=["a", "b"], T=50.0) for n in ("run1", "run2")]
+    cand = SimpleNamespace(key="eccentricity:idler", kind="eccentricity", element="idler")
+    d = SimpleNamespace(fit_ctx=lambda: runs, orders_for=lambda c, key: [1])
+    b = {"cand": cand, "G": G, "M": M, "W": W, "X": np.array([200e-6 + 0j])}
+    est_run = structure.per_run_estimates(d, b)
+    assert est_run["run1"][0] == pytest.approx(300e-6, rel=1e-9)
+    assert est_run["run2"][0] == pytest.approx(100e-6, rel=1e-9)
+    # sigma^2 = 1 / sum |G|^2 T / (2 S): well under a micrometre here
+    assert all(0 < s < 1e-6 for _, s in est_run.values())
+    msg = structure.per_run_disagreement(d, b)
+    assert msg and "300 um in run run1" in msg and "100 um in run run2" in msg
+    # one run alone cannot disagree
+    assert structure.per_run_estimates(SimpleNamespace(fit_ctx=lambda: runs[:1], orders_for=d.orders_for),
+                                       {**b, "G": G[:2], "M": M[:2], "W": W[:2]}) == {}
