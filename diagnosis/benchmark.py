@@ -632,26 +632,38 @@ def _match_detail(mode, t, r, truth):
     return d
 
 
-def gap_of(report, truth):
-    """In-sample and held-out NRMSE (nominal, refined, ratio) at the most affected
-    sensor (largest nominal RMS error in sample), plus the oracle ratio: what the
-    true model would reach (the noise floor)."""
-    if not report:
-        return None
-    hs = report.get("holdout") or {}
+def most_affected(report):
+    """(sensor, [(key, hold, {nominal, refined} NRMSE or None)]) at the sensor with the
+    largest in-sample nominal RMS error, for the in-sample and held-out blocks of the
+    report's ``holdout``; None if the report has no in-sample gap."""
+    hs = (report or {}).get("holdout") or {}
     ins = hs.get("in_sample") or {}
-    oos = hs.get("out_of_sample") or {}
     cand = [(v["nominal"].get("rms") or 0.0, s) for s, v in ins.items() if v and v.get("nominal")]
     if not cand:
         return None
     sensor = max(cand)[1]
+    blocks = []
+    for key, block, hold in (("in_sample", ins, False), ("held_out", hs.get("out_of_sample") or {}, True)):
+        v = block.get(sensor)
+        ok = v and v.get("nominal") and v.get("refined")
+        blocks.append((key, hold, (v["nominal"]["nrmse"], v["refined"]["nrmse"]) if ok else None))
+    return sensor, blocks
+
+
+def gap_of(report, truth):
+    """In-sample and held-out NRMSE (nominal, refined, ratio) at the most affected
+    sensor (largest nominal RMS error in sample), plus the oracle ratio: what the
+    true model would reach (the noise floor)."""
+    found = most_affected(report)
+    if found is None:
+        return None
+    sensor, blocks = found
     out = {"sensor": sensor}
-    for key, block, hold in (("in_sample", ins, False), ("held_out", oos, True)):
-        v = (block or {}).get(sensor)
-        if not v or not v.get("nominal") or not v.get("refined"):
+    for key, hold, nr in blocks:
+        if nr is None:
             out[key] = None
             continue
-        n, r = v["nominal"]["nrmse"], v["refined"]["nrmse"]
+        n, r = nr
         out[key] = {"nominal": n, "refined": r, "ratio": r / n if n else None,
                     "oracle_ratio": _oracle(truth, sensor, hold, n)}
     return out

@@ -479,19 +479,16 @@ def closed_shares(report, truth):
     with the largest in-sample nominal RMS error, in sample and held out (None
     where the nominal is already within the achievable). The report's own
     ``closed_share`` (gap block), if it has one, is recorded beside it."""
-    hs = (report or {}).get("holdout") or {}
-    ins = hs.get("in_sample") or {}
-    cand = [(v["nominal"].get("rms") or 0.0, s) for s, v in ins.items() if v and v.get("nominal")]
-    if not cand:
+    found = B.most_affected(report)
+    if found is None:
         return None
-    sensor = max(cand)[1]
+    sensor, blocks = found
     out = {"sensor": sensor}
-    for key, block, hold in (("in_sample", ins, False), ("held_out", hs.get("out_of_sample") or {}, True)):
-        v = block.get(sensor)
-        if not v or not v.get("nominal") or not v.get("refined"):
+    for key, hold, nr in blocks:
+        if nr is None:
             out[key] = None
             continue
-        n, r = v["nominal"]["nrmse"], v["refined"]["nrmse"]
+        n, r = nr
         a = _achievable(truth, _lc(sensor), hold)
         share = (n - r) / (n - a) if a is not None and n - a > 1e-12 else None
         out[key] = {"nominal": n, "refined": r, "achievable": a, "closed_share": share}
