@@ -408,13 +408,19 @@ class Diagnosis:
 
     MIN_PIECE_REVS = 3.0  # revolutions of an element a steady piece needs for its own fit
 
+    @staticmethod
+    def _mask_pieces(c):
+        """(all fit sample indices, one index array per contiguous piece of the fit mask:
+        the steady windows of a ramped run, or the whole window)."""
+        idx_all = np.flatnonzero(c.mask)
+        cuts = np.flatnonzero(np.diff(idx_all) > 1) + 1
+        return idx_all, [p for p in np.split(idx_all, cuts) if len(p) > 1]
+
     def _fit_pieces(self, c, th):
         """Index arrays of the fit samples: one per contiguous piece of the fit mask (the
         steady windows of a ramped run) if there are several and each holds
         MIN_PIECE_REVS revolutions of the element, else the whole mask as one."""
-        idx_all = np.flatnonzero(c.mask)
-        cuts = np.flatnonzero(np.diff(idx_all) > 1) + 1
-        pieces = [p for p in np.split(idx_all, cuts) if len(p) > 1]
+        idx_all, pieces = self._mask_pieces(c)
         if len(pieces) > 1 and all(abs(th[p[-1]] - th[p[0]]) >= 2 * math.pi * self.MIN_PIECE_REVS
                                    for p in pieces):
             return pieces
@@ -430,12 +436,9 @@ class Diagnosis:
         Segments never straddle two steady windows of the fit: at another line
         speed an order sits elsewhere on the line's frequency response, and its
         phase there differs for a real source as much as for noise."""
-        idx_all = np.flatnonzero(c.mask)
+        idx_all, pieces = self._mask_pieces(c)
         if len(idx_all) < 2:
             return 1.0
-        # contiguous pieces of the fit mask: one per steady window (the whole window if no ramp)
-        cuts = np.flatnonzero(np.diff(idx_all) > 1) + 1
-        pieces = [p for p in np.split(idx_all, cuts) if len(p) > 1]
         num = den = 0.0
         for idx in pieces:
             revs = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi)

@@ -172,15 +172,6 @@ def standard_errors(d, ctxs, resp, cols, cands, Xs, sims):
             r = _periodic(c, c.meas[s] - sims[c.name].columns[s])[c.mask]
             left[c.name, s] = est.NoiseFloor(r, c.fs, median_hz=4.0)
 
-    def var_left(cand, j):
-        v = 0.0
-        for c in ctxs:
-            f = np.array([j * c.freq.get(cand.key, 0.0)])
-            for s in c.sensors:
-                S_med = max(float(np.median(c.floors[s].S)), 1e-300)
-                v = max(v, float(left[c.name, s](f)[0]) / S_med * 0.5 * c.fs)
-        return v
-
     pos = {cols[m]: a for a, m in enumerate(idx)}
     for (i, j, ph), a in pos.items():
         b = pos.get((i, j, 1j))
@@ -188,7 +179,8 @@ def standard_errors(d, ctxs, resp, cols, cands, Xs, sims):
             continue
         u = Xs[i][j - 1] / abs(Xs[i][j - 1])          # |X| changes along X's own direction
         var = u.real ** 2 * cov[a, a] + u.imag ** 2 * cov[b, b] + 2 * u.real * u.imag * cov[a, b]
-        out[i][j - 1] = float(np.sqrt(max(var, 0.0) * var_left(cands[i], j)))
+        out[i][j - 1] = float(np.sqrt(max(var, 0.0) * _local_variance(ctxs, cands[i], j,
+                                                                       lambda c, s: left[c.name, s])))
     return out
 
 
@@ -249,13 +241,20 @@ def noise_drop(d, ctxs, cand, j):
     frequency, sigma^2 = S(f_j) fs / 2, in the weighted units (w^2 = 1/median S);
     the largest over the fit runs and sensors (a stacked fit removes about one
     regressor's worth of the noisiest block)."""
+    return 2.0 * _local_variance(ctxs, cand, j, lambda c, s: c.floors[s])
+
+
+def _local_variance(ctxs, cand, j, floor_of):
+    """Largest over the fit runs and sensors of the variance per regressor at order j's
+    frequency, in the weighted units of :func:`sse`: S(f_j) / median S x fs / 2, with
+    S from ``floor_of(ctx, sensor)`` (a NoiseFloor)."""
     out = 0.0
     for c in ctxs:
-        f = j * c.freq.get(cand.key, 0.0)
+        f = np.array([j * c.freq.get(cand.key, 0.0)])
         for s in c.sensors:
             S_med = max(float(np.median(c.floors[s].S)), 1e-300)
-            out = max(out, float(c.floors[s](np.array([f]))[0]) / S_med * 0.5 * c.fs)
-    return 2.0 * out
+            out = max(out, float(floor_of(c, s)(f)[0]) / S_med * 0.5 * c.fs)
+    return out
 
 
 def prune(d, ctxs, resp, cols, sims0, subset, cands):
