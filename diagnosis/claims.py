@@ -20,6 +20,8 @@ from scipy import signal, stats
 
 from webline.diagnosis import estimate as est
 
+ORDER_LOG10_P = -5.0   # one order's harmonic left is more than noise below this log10 p
+
 
 # ================================================================== the check ====
 def nrmse_over(ctxs, sims, s):
@@ -201,6 +203,7 @@ def leftovers(d, noise, remaining_peaks):
             k = fe["ranked"][0]["cand"]
             e_nom = e_ref = z_ref = 0.0
             amp_nom, amp_ref, n_terms = {}, {}, 0
+            z_order = {}
             for c in fit:
                 orders = d.orders_for(c, k.key)
                 if not orders or s not in c.sensors:
@@ -213,11 +216,13 @@ def leftovers(d, noise, remaining_peaks):
                                        th, orders, c.mask)
                 e_nom += float(np.sum(np.abs(Yn) ** 2))
                 e_ref += float(np.sum(np.abs(Yr) ** 2))
-                z_ref += float(np.sum(est.harmonic_z(Yr, f, c.floors[s], c.T)))
+                z = est.harmonic_z(Yr, f, c.floors[s], c.T)
+                z_ref += float(np.sum(z))
                 n_terms += len(orders)
-                for j, a, b in zip(orders, Yn, Yr):
+                for j, a, b, zj in zip(orders, Yn, Yr, z):
                     amp_nom.setdefault(j, []).append(abs(a))
                     amp_ref.setdefault(j, []).append(abs(b))
+                    z_order.setdefault(j, []).append(float(zj))
             if not n_terms:
                 continue
             effs.append({"element": k.element, "kind": k.kind, "orders": sorted(amp_nom),
@@ -226,7 +231,8 @@ def leftovers(d, noise, remaining_peaks):
                          "share_left": e_ref / e_nom if e_nom > 0 else None,
                          "z_left": z_ref, "n_terms": n_terms,
                          # what is left is more than noise at these orders
-                         "significant": bool(z_ref > n_terms + 3.0 * math.sqrt(2.0 * n_terms) + 9.0)})
+                         "significant": bool(z_ref > n_terms + 3.0 * math.sqrt(2.0 * n_terms) + 9.0),
+                         "by_order": [_order_left(j, amp_nom[j], amp_ref[j], z_order[j]) for j in sorted(amp_nom)]})
         untagged = []
         for rname, per in (remaining_peaks or {}).items():
             for p in per.get(s, []):
@@ -235,6 +241,16 @@ def leftovers(d, noise, remaining_peaks):
         out[s] = {"effects": effs, "untagged_peaks_left": untagged,
                   "noise_floor_rms_N": {c.name: noise[c.name][s]["rms_N"] for c in d.ctx if s in c.sensors}}
     return out
+
+
+def _order_left(j, a_nom, a_ref, z):
+    """One order's harmonic left on one sensor: share of the nominal energy and
+    whether what is left is more than noise (summed z over the fit runs is
+    Gamma(runs, 1) for noise alone; significant below p = 1e-5)."""
+    e_nom = float(np.sum(np.square(a_nom)))
+    return {"order": int(j), "share_left": float(np.sum(np.square(a_ref))) / e_nom if e_nom > 0 else None,
+            "z_left": float(np.sum(z)),
+            "significant": bool(est.gamma_log10_sf(float(np.sum(z)), len(z)) < ORDER_LOG10_P)}
 
 
 def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7):

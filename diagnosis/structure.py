@@ -40,6 +40,7 @@ from webline.diagnosis.line_model import SimulationFailed
 log = logging.getLogger("webline.diagnose")
 
 LEFT_SHARE = 0.25        # harmonics left / nominal on a sensor that make the form suspect
+ORDER_LEFT_SHARE = 0.5   # ... or one order's harmonic left / nominal (energy)
 AS_WELL = 0.10           # share of the best improvement within which a form fits "about as well"
 PARSIMONY = 0.05         # relative NRMSE per sensor a set with fewer sources may always give up to the full set
 RECOVER = 0.80           # ... or: the share of what the secondary sources explained (per sensor) the form explains
@@ -91,6 +92,12 @@ def triggers(d, left):
             if e["significant"] and e["share_left"] is not None and e["share_left"] > LEFT_SHARE:
                 out.append(f"{e['kind']} of {e['element']}: {100 * e['share_left']:.0f} % of its harmonics "
                            f"stay on {s} after refinement")
+            # one order can be left whole where the others fit: its response (often
+            # under the tension loops) is what the form gets wrong
+            for o in e.get("by_order", []):
+                if o["significant"] and o["share_left"] is not None and o["share_left"] > ORDER_LEFT_SHARE:
+                    out.append(f"{e['kind']} of {e['element']}: order {o['order']} keeps "
+                               f"{100 * o['share_left']:.0f} % of its harmonic on {s} after refinement")
     for r in getattr(d, "rejected", []):
         if r.get("stage") == "refine check" and r["kind"] in ("eccentricity", "out_of_round"):
             out.append(f"{r['kind']} of {r['element']} rejected by the check ({r.get('reason')})")
