@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from webline.diagnosis import benchmark as B
+from webline.diagnosis import tolerances
 
 FAMILY = "independent"
 DURATION = 60.0            # s, a record
@@ -119,8 +120,7 @@ class ICase(B.Case):
     model: TruthModel = field(default_factory=TruthModel)
 
 
-def _log_uniform(r, lo, hi):
-    return float(math.exp(r.uniform(math.log(lo), math.log(hi))))
+_log_uniform = tolerances.log_uniform
 
 
 def draw_truth_model(r, line_doc):
@@ -146,53 +146,17 @@ def draw_truth_model(r, line_doc):
 
 
 def _q(value, dim):
-    from webline.orchestrator.units import quantity
-    return float(quantity(value, dim))
-
-
-def _el(doc, name):
-    return next(x for x in doc["path"] if x["name"] == name)
+    return tolerances._q(value, dim)
 
 
 def param_set(model, line_doc):
     """Dotted ``set`` entries (unit strings) of the parameter draws, and the
     truth document with them applied (for effects drawn on the truth's inertia)."""
     p = model.params
-    s = {}
-    web = line_doc["web"]
-    if "EA" in web:
-        s["web.EA"] = f"{_q(web['EA'], 'force') * p['EA_scale']:.6g} N"
-    else:
-        s["web.E"] = f"{_q(web['E'], 'modulus') * p['EA_scale']:.6g} Pa"
-    for e in line_doc["path"]:
-        n = e["name"]
-        k = p["inertia_scale"][n]
-        if "core_inertia" in e:
-            s[f"path.{n}.core_inertia"] = f"{_q(e['core_inertia'], 'inertia') * k:.6g} kg*m^2"
-        elif "inertia" in e:
-            s[f"path.{n}.inertia"] = f"{_q(e['inertia'], 'inertia') * k:.6g} kg*m^2"
-        elif "mass" in e:
-            s[f"path.{n}.mass"] = f"{_q(e['mass'], 'mass') * k:.6g} kg"
-        if n in p["friction_scale"]:
-            s[f"path.{n}.friction"] = f"{_q(e['friction'], 'rot_damping') * p['friction_scale'][n]:.6g} N*m*s/rad"
-        if n in p["span_scale"]:
-            sp = e["span"]
-            L = _q(sp["length"] if isinstance(sp, dict) else sp, "length") * p["span_scale"][n]
-            s[f"path.{n}.span.length" if isinstance(sp, dict) else f"path.{n}.span"] = f"{L:.6g} m"
-        if e["type"] == "rewind":
-            s[f"path.{n}.radius"] = f"{_q(e['radius'], 'length') * p['rewind_radius_scale']:.6g} m"
-    doc = copy.deepcopy(line_doc)
-    for key, v in s.items():
-        parts = key.split(".")
-        if parts[0] == "path":
-            el = _el(doc, parts[1])
-            if len(parts) == 4:
-                el[parts[2]][parts[3]] = v
-            else:
-                el[parts[2]] = v
-        else:
-            doc[parts[0]][parts[1]] = v
-    return s, doc
+    s = tolerances.scaled_set(line_doc, EA=p["EA_scale"], inertia=p["inertia_scale"],
+                              friction=p["friction_scale"], span=p["span_scale"],
+                              rewind_radius=p["rewind_radius_scale"])
+    return s, tolerances.applied(line_doc, s)
 
 
 def form_set(model, line_doc):

@@ -78,6 +78,7 @@ def build(d):
     rep["findings"] = claims.humps(d, d.noise)
     rep["rejected"] = _rejected(d)
     rep["structure"] = getattr(d, "structure", None)
+    rep["transfer"] = getattr(d, "transfer", None)
     if getattr(d, "confirm_result", None) is not None:
         rep["confirm"] = d.confirm_result   # absent: --no-confirm, or the diagnosis ran on the co-simulation
     rep["verdict"] = _verdict(rep)
@@ -181,6 +182,8 @@ def _harmonic_entry(b, X, j):
     if sg is not None and j < len(sg) and np.isfinite(sg[j]):
         out["sigma"] = float(sg[j])
         out["identifiable"] = bool(sg[j] <= SIGMA_SHARE * abs(X[j]))
+    if j + 1 in (b.get("transfer_dropped") or ()):
+        out["in_refined_layout"] = False   # its held-out prediction does not carry (report.transfer)
     return out
 
 

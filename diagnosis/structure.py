@@ -422,6 +422,9 @@ def screen(d):
     as_well = [r for r in scored if r["score"] <= chosen["score"] + AS_WELL * room]
     # forms only predicted (not among the two simulated) count by their predicted score
     as_well += [x[0] for x in not_b if x[0]["predicted_score"] <= chosen["score"] + AS_WELL * room]
+    # the other forms that fit about as well: the transfer screen asks them too
+    d.form_members = [(r["name"], r["doc"]) for r in as_well
+                      if "doc" in r and r is not chosen and "without" not in r]
     unc = {}
     for cand, X0, fe in effs:
         if fe is None and chosen is results[0]:
