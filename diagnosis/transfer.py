@@ -185,17 +185,32 @@ def screen(d):
     forms = [fd for _name, fd in getattr(d, "form_members", []) or []]
     docs = [doc] + draws + forms
     groups = [0] * (1 + len(draws)) + list(range(1, len(forms) + 1))
-    jobs, keys = [], []
+    plan = []
+    for cand, X in effs:
+        base_X = layout_edit.current_fourier(d.model.copy_doc(), cand.element, len(X))
+        orders = [j + 1 for j in np.flatnonzero(np.abs(X - base_X) > 0)]
+        if orders:
+            plan.append((cand, orders))
+    # one line at a time: only its harmonics are kept (a line's simulations of 60 s
+    # records at 1 kHz are ~100 MB, and there are 2 per run and line)
+    G, H, failed, before, M = {}, {}, set(), None, None
     for k, dk in enumerate(docs):
-        for which, dd in (("with", dk), ("without", _without_effects(d, dk, effs))):
-            for c in d.ctx:
-                jobs.append((c.run, dd, f"transfer member {k} {which}"))
-                keys.append((k, which, c.name))
-    sims = d.model.simulate_many(jobs)
-    by = {}
-    for key, sim in zip(keys, sims):
-        by.setdefault(key[:2], {})[key[2]] = sim
-    failed = {k for (k, _w), v in by.items() if any(isinstance(x, Exception) for x in v.values())}
+        jobs = [(c.run, dd, f"transfer line {k} {which}")
+                for which, dd in (("with", dk), ("without", _without_effects(d, dk, effs))) for c in d.ctx]
+        sims = d.model.simulate_many(jobs)
+        if any(isinstance(x, Exception) for x in sims):
+            failed.add(k)
+            continue
+        n = len(d.ctx)
+        w = {c.name: sim for c, sim in zip(d.ctx, sims[:n])}
+        wo = {c.name: sim for c, sim in zip(d.ctx, sims[n:])}
+        for cand, orders in plan:
+            G.setdefault(cand.element, {})[k] = responses(d, fit, w, wo, cand, orders)
+            H.setdefault(cand.element, {})[k] = responses(d, hold, w, wo, cand, orders)
+        if k == 0:
+            before = wo
+            M = {cand.element: measured(d, fit, w, wo, cand, orders) for cand, orders in plan}
+        del sims, w, wo
     if 0 in failed:
         d.notes.append("transfer screen skipped: the refined model failed on a run")
         return
@@ -203,15 +218,9 @@ def screen(d):
     n_groups = len({groups[k] for k in ks})
     prior = np.array([1.0 / n_groups / sum(1 for q in ks if groups[q] == groups[k]) for k in ks])
     verdicts = []
-    for cand, X in effs:
-        base_X = layout_edit.current_fourier(d.model.copy_doc(), cand.element, len(X))
-        orders = [j + 1 for j in np.flatnonzero(np.abs(X - base_X) > 0)]
-        if not orders:
-            continue
-        G = [responses(d, fit, by[(k, "with")], by[(k, "without")], cand, orders) for k in ks]
-        H = [responses(d, hold, by[(k, "with")], by[(k, "without")], cand, orders) for k in ks]
-        M = measured(d, fit, by[(0, "with")], by[(0, "without")], cand, orders)
-        verdicts += order_verdicts(d, M, G, H, cand, orders, fit, hold, prior)
+    for cand, orders in plan:
+        verdicts += order_verdicts(d, M[cand.element], [G[cand.element][k] for k in ks],
+                                   [H[cand.element][k] for k in ks], cand, orders, fit, hold, prior)
     d.transfer = {"members": len(ks), "forms": [n for n, _ in getattr(d, "form_members", []) or []],
                   "failed_members": len(failed), "tolerances": dict(tolerances.DATA_SHEET),
                   "keep_share": KEEP_SHARE, "z_material": Z_MATERIAL, "orders": verdicts, "dropped": []}
@@ -231,7 +240,6 @@ def screen(d):
             cur[j - 1] = base_X[j - 1]
         new_doc = layout_edit.with_fourier(new_doc, cand, np.abs(cur), np.angle(cur))
     new_sims = d._simulate_all(new_doc, "refined, transfer")
-    before = by[(0, "without")]
     ok = []
     for cand, _X in effs:
         if cand.element not in drop:

@@ -1,0 +1,132 @@
+"""Does what the fit runs taught carry to a held-out run (diagnosis.transfer)?
+
+The verdict per order is the weighted share of plausible lines in which putting
+the order into the held-out prediction lowers the error; the lines are weighted
+by how well each explains the fit runs' harmonics. Checked here on responses
+written by hand, so each rule is seen alone; and the tolerances' scaled layout
+against values computed by hand."""
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+
+from webline.diagnosis import tolerances, transfer
+
+EWL = Path(__file__).resolve().parents[1] / "scenarios" / "ewl.yaml"
+KEY = "k"
+
+
+def _ctx(name, sensors, T=40.0, f=2.0, S=1e-4):
+    floor = (lambda freqs, S=S: np.full(len(np.atleast_1d(freqs)), S))
+    return SimpleNamespace(name=name, sensors=sensors, T=T, freq={KEY: f}, floors={s: floor for s in sensors})
+
+
+CAND = SimpleNamespace(key=KEY, element="roller9", kind="eccentricity")
+SENS = ["lc9.T", "lc19.T"]
+FIT, HOLD = _ctx("fit", SENS), _ctx("held", SENS, f=1.5)
+
+
+def _resp(ctx, values):
+    return {ctx.name: {s: np.array([v]) for s, v in zip(ctx.sensors, values)}}
+
+
+def _verdict(G, H, M, prior=None):
+    prior = np.full(len(G), 1.0 / len(G)) if prior is None else np.asarray(prior)
+    out = transfer.order_verdicts(None, _resp(FIT, M), [_resp(FIT, g) for g in G], [_resp(HOLD, h) for h in H],
+                                  CAND, [1], [FIT], [HOLD], prior)
+    assert len(out) == 1
+    return out[0]
+
+
+def test_an_order_every_line_predicts_alike_stays():
+    g = [0.3 + 0.1j, 0.1 - 0.05j]
+    h0 = np.array([0.2 - 0.1j, 0.05 + 0.02j])
+    rng = np.random.default_rng(1)
+    H = [h0] + [h0 * (1 + 0.05 * rng.standard_normal()) for _ in range(6)]
+    v = _verdict([g] * 7, H, g)
+    assert v["helps_share"] == pytest.approx(1.0)
+    assert v["reliable"]
+    # the expected error with the order is a few per cent of its energy, without it all of it
+    assert v["expected_error_with"] < 0.01 and v["expected_error_without"] == pytest.approx(1.0, rel=0.15)
+
+
+def test_an_order_the_lines_place_on_a_mode_leaves():
+    """Held-out responses scattered in phase and size (a lightly damped mode each
+    line puts elsewhere): the prediction helps in few lines."""
+    g = [0.3 + 0.1j, 0.1 - 0.05j]
+    h0 = np.array([0.2 - 0.1j, 0.05 + 0.02j])
+    rng = np.random.default_rng(2)
+    H = [h0] + [h0 * 3.0 * np.exp(1j * rng.uniform(0.6 * np.pi, 1.4 * np.pi)) for _ in range(8)]
+    v = _verdict([g] * 9, H, g)
+    assert v["helps_share"] < 0.5
+    assert not v["reliable"]
+
+
+def test_the_fit_runs_pick_the_line():
+    """All lines but one predict the held-out run as the refined model does; the
+    one whose response pattern over the two load cells matches the fit data
+    predicts a fifth of it, in antiphase. The data say which line it is."""
+    g0 = np.array([0.3 + 0.1j, 0.1 - 0.05j])
+    h0 = np.array([0.2 - 0.1j, 0.05 + 0.02j])
+    g_other = np.array([0.3 + 0.1j, -0.2 + 0.15j])   # another ratio lc19/lc9
+    M = g_other * 1.1                                   # the data follow that line's pattern
+    G = [g0] * 6 + [g_other]
+    H = [h0] * 6 + [-0.2 * h0]
+    v = _verdict(G, H, M)
+    assert v["line_weights"][-1] > 0.99
+    assert not v["reliable"]
+    # without the data's pattern (M like the refined model's) the same lines keep it
+    assert _verdict(G, H, g0 * 1.1)["reliable"]
+
+
+def test_an_order_below_the_noise_stays_whatever_the_lines_say():
+    g = [1e-6, 1e-6]
+    h0 = np.array([1e-5, 1e-5])   # z = |h|^2 T / (2 S) = 1e-10 * 40 / 2e-4 * 2 sensors = 4e-5
+    H = [h0] + [-h0] * 5
+    v = _verdict([g] * 6, H, g)
+    assert v["z"] < transfer.Z_MATERIAL and v["reliable"]
+
+
+def test_scaled_set_by_hand():
+    from webline.orchestrator.units import quantity
+    doc = yaml.safe_load(EWL.read_text())
+    s = tolerances.scaled_set(doc, EA=1.1, inertia={"idler_u1": 0.5}, span={"roller9": 1.05})
+    web = doc["web"]
+    if "EA" in web:
+        assert float(s["web.EA"].split()[0]) == pytest.approx(1.1 * float(quantity(web["EA"], "force")), rel=1e-5)
+    else:
+        assert float(s["web.E"].split()[0]) == pytest.approx(1.1 * float(quantity(web["E"], "modulus")), rel=1e-5)
+    el = {e["name"]: e for e in doc["path"]}
+    key = next(k for k in s if k.startswith("path.idler_u1."))
+    field = key.split(".")[2]
+    assert float(s[key].split()[0]) == pytest.approx(
+        0.5 * float(quantity(el["idler_u1"][field], {"mass": "mass", "inertia": "inertia"}.get(field, "inertia"))),
+        rel=1e-5)
+    sp = el["roller9"]["span"]
+    L = float(quantity(sp["length"] if isinstance(sp, dict) else sp, "length"))
+    key = next(k for k in s if k.startswith("path.roller9.span"))
+    assert float(s[key].split()[0]) == pytest.approx(1.05 * L, rel=1e-5)
+    # elements without a factor are left to the layout
+    assert not any(k.startswith("path.guide_in.") for k in s)
+    # the written values build: the scaled layout loads
+    doc2 = tolerances.applied(doc, s)
+    assert doc2["path"] != doc["path"]
+
+
+def test_members_are_repeatable_and_within_the_tolerances():
+    doc = yaml.safe_load(EWL.read_text())
+    a = transfer.members(doc, {"set": {}}, n=4)
+    b = transfer.members(doc, {"set": {}}, n=4)
+    assert a == b and len(a) == 4
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        kw = tolerances.draw(rng, doc)
+        assert abs(kw["EA"] - 1) <= tolerances.DATA_SHEET["EA"]
+        assert all(abs(v - 1) <= tolerances.DATA_SHEET["inertia"] for v in kw["inertia"].values())
+        assert all(abs(v - 1) <= tolerances.DATA_SHEET["span"] for v in kw["span"].values())
+    # a key the refined layout sets (an estimated parameter) stays the refined layout's
+    own = next(iter(a[0]))
+    c = transfer.members(doc, {"set": {own: "x"}}, n=4)
+    assert all(own not in m for m in c)
