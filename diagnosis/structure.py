@@ -151,6 +151,40 @@ def per_run_estimates(d, b):
     return est_run
 
 
+def per_run_in_form(d, doc, cand, X):
+    """{run: (|X_j|, sigma)} of the dominant order j of ``cand`` estimated from each fit
+    run alone in the model ``doc`` (the chosen form, with every effect): the line's
+    response per run and sensor is simulated (``doc`` with and without this effect),
+    so the estimate is made in the model the refined layout runs. {} with fewer than
+    two fit runs that carry the element's orders."""
+    from webline.diagnosis import estimate as est_mod
+    from webline.diagnosis import transfer
+    fit = [c for c in d.fit_ctx() if d.orders_for(c, cand.key)]
+    X = np.asarray(X, complex)
+    if len(fit) < 2 or not np.any(np.abs(X) > 0):
+        return {}
+    j = int(np.argmax(np.abs(X)))
+    wo = transfer._without_effects(d, doc, [(cand, X)])
+    sw = d._simulate_all(doc, "per-run estimate, with", fit)
+    so = d._simulate_all(wo, "per-run estimate, without", fit)
+    out = {}
+    for c in fit:
+        th = d._theta_refined(c, cand)
+        num = den = info = 0.0
+        for s in c.sensors:
+            H = est_mod.fit_harmonics(sw[c.name].columns[s] - so[c.name].columns[s], th, [j + 1], c.mask)[0]
+            M = est_mod.fit_harmonics(c.meas[s] - so[c.name].columns[s], th, [j + 1], c.mask)[0]
+            G = H / X[j]
+            S = float(c.floors[s](np.atleast_1d((j + 1) * c.freq.get(cand.key, 0.0)))[0])
+            W = 1.0 / max(S, 1e-300)
+            num += W * np.conj(G) * M
+            den += W * abs(G) ** 2
+            info += abs(G) ** 2 * c.T / (2.0 * max(S, 1e-300))
+        if den > 0:
+            out[c.name] = (float(abs(num / den)), math.sqrt(1.0 / max(info, 1e-300)))
+    return out
+
+
 def per_run_disagreement(d, b):
     """A roll's run-out is the same at every speed: per-run estimates of the
     dominant order (:func:`per_run_estimates`) must agree within their noise.
@@ -443,6 +477,15 @@ def screen(d):
                                 float(max(abs(r["X"][cand.element][i]) for r in as_well if cand.element in r["X"]))]
                                for i in range(len(Xc))]}
         runs = per_run_estimates(d, fe["ranked"][0]) if fe is not None else {}
+        if runs and chosen is not results[0]:
+            # the layout's form was replaced: judge the runs' agreement in the chosen one
+            try:
+                runs = per_run_in_form(d, chosen["doc"], cand, Xc)
+            except SimulationFailed:
+                pass
+        if runs:
+            unc[cand.element]["by_run"] = {k: v[0] for k, v in runs.items()}
+            unc[cand.element]["by_run_form"] = chosen.get("form", chosen["name"])
         xs = [x for x, _ in runs.values() if x > 0]
         if len(xs) >= 2 and max(xs) / min(xs) > NOT_IDENTIFIABLE:
             # a run-out is the same at every speed: runs that need amplitudes a factor 2
