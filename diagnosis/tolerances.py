@@ -94,5 +94,33 @@ def draw(rng, line_doc, tol=None):
             "span": {e["name"]: u(tol.get("span", 0.0)) for e in path if "span" in e}}
 
 
+#: what a data sheet leaves open about a line's fast dynamics: the load cells'
+#: amplifier filter (its time constant x0.5-2, first or second order), the
+#: drives' current loops (a lag of 0-5 ms) and the web's internal damping
+#: (Kelvin-Voigt, 0.3-5 ms, or none). Above ~10 Hz these move an order's
+#: response as much as the parameters do.
+DYNAMICS = {"filter_scale": (0.5, 2.0), "filter_damping": (0.5, 0.9), "current_lag_s": (0.0, 5e-3),
+            "web_damping_s": (0.3e-3, 5e-3)}
+
+
+def draw_dynamics(rng, line_doc, ranges=None):
+    """Dotted ``set`` entries of one draw of the fast dynamics within ``ranges``
+    (default :data:`DYNAMICS`): each load cell's filter (time constant scaled,
+    order 1 or 2), each speed loop's current lag, the web's damping (or none)."""
+    r = DYNAMICS if ranges is None else ranges
+    s = {}
+    for lc, spec in (line_doc.get("sensors") or {}).items():
+        tau = _q((spec or {}).get("filter", "5 ms"), "time") * log_uniform(rng, *r["filter_scale"])
+        s[f"sensors.{lc}.filter"] = f"{1e3 * tau:.4g} ms"
+        if rng.uniform() < 0.5:
+            s[f"sensors.{lc}.filter_order"] = 2
+            s[f"sensors.{lc}.filter_damping"] = f"{rng.uniform(*r['filter_damping']):.3g}"
+    for el in ((line_doc.get("drives") or {}).get("speed_loops") or {}):
+        s[f"drives.speed_loops.{el}.current_lag"] = f"{1e3 * rng.uniform(*r['current_lag_s']):.4g} ms"
+    if rng.uniform() < 0.5:
+        s["web.damping"] = f"{1e3 * log_uniform(rng, *r['web_damping_s']):.4g} ms"
+    return s
+
+
 def log_uniform(rng, lo, hi):
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))

@@ -9,29 +9,32 @@ correct run-out can then predict a line the held-out data do not have
 0.55 mm, at 17 Hz in the held-out run next to a 17.6 Hz idler mode of the
 model; held-out lc9 NRMSE 1.00 -> 1.20 with it, 0.98 without).
 
-The screen asks, per reported order and held-out run, whether putting the
-order into the prediction lowers the expected error over lines within the
-data sheet's tolerances (:data:`diagnosis.tolerances.DATA_SHEET`):
+The screen asks, per reported order, held-out run and sensor, whether putting
+the order into the prediction lowers the error over lines a data sheet cannot
+tell from the refined model (:data:`diagnosis.tolerances.DATA_SHEET` and
+:data:`~diagnosis.tolerances.DYNAMICS`) and over the other model forms that fit
+about as well:
 
 * ``MEMBERS`` lines drawn within the tolerances (seeded, so a diagnosis is
   repeatable), each simulated with and without the reported effects on every
-  run; the difference's harmonics on each effect's angle are the member's
+  run; the difference's harmonics on each effect's angle are the line's
   responses: ``G_k`` on the fit runs, ``H_k`` on a held-out run (per sensor,
   whitened by the fit runs' noise floor at that frequency);
-* in member k the fit runs would have asked for the coefficient scaled by
-  ``alpha_k = <G_k, G_0> / <G_k, G_k>`` (its least-squares match to what the
-  refined model shows there), so member k predicts ``alpha_k H_k`` on the
-  held-out run where the refined model predicts ``H_0``;
-* with the order the expected error is ``mean |alpha_k H_k - H_0|^2``,
-  without it ``mean |alpha_k H_k|^2``; the first is smaller exactly when
-  ``rho = Re <mean alpha_k H_k, H_0> / |H_0|^2 > 1/2``.
+* in line k the fit runs ask for the coefficient scaled by ``alpha_k`` (the
+  least-squares match of ``alpha_k G_k`` to the measured harmonics), so line
+  k predicts ``alpha_k H_k`` on the held-out run where the refined layout
+  predicts ``H_0``; the lines are weighted by how well ``alpha_k G_k``
+  explains the fit runs (chi-square over sensors and runs, tempered);
+* with the order the error on a sensor is ``|alpha_k H_k - H_0|^2``, without
+  it ``|alpha_k H_k|^2``.
 
-An order with ``rho <= 1/2`` on some held-out run, where its predicted
-harmonic is clearly above the noise (``Z_MATERIAL``), leaves the refined
-layout (its estimate stays in the report, marked). The layout without it must
-still pass the check of :mod:`diagnosis.claims` on the fit runs, against the
-model without the effect; if not, the order stays and the report says its
-held-out prediction is not reliable. Only the held-out runs' conditions
+An order that helps in at most ``KEEP_SHARE`` of the weighted lines on some
+sensor of a held-out run, where its predicted harmonic is clearly above the
+noise (``Z_MATERIAL``), leaves the refined layout (its estimate stays in the
+report, marked). The layout without it must still pass the check of
+:mod:`diagnosis.claims` on the fit runs, against the model without the
+effect; if not, the order stays and the report says its held-out prediction
+is not reliable. Only the held-out runs' conditions
 (speed profile, roll radius) are used, never their data.
 """
 import logging
@@ -60,6 +63,9 @@ def members(base_doc, refined_doc, n=MEMBERS, seed=SEED, tol=None):
     out = []
     for _ in range(n):
         s = tolerances.scaled_set(base_doc, **tolerances.draw(rng, base_doc, tol))
+        s.update(tolerances.draw_dynamics(rng, base_doc))
+        if any(k.endswith(".filter_order") and k in own for k in s):   # a chosen form's order stays
+            s = {k: v for k, v in s.items() if not k.endswith(".filter_damping")}
         out.append({k: v for k, v in s.items() if k not in own})
     return out
 
@@ -149,22 +155,30 @@ def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
             h0, wh = vec(H[0], [c])
             if len(h0) == 0:
                 continue
-            p0 = alphas[0] * h0           # the refined model's prediction
-            e0 = float(np.sum(wh * np.abs(p0) ** 2))
+            e0 = float(np.sum(wh * np.abs(h0) ** 2))   # the refined layout predicts h0
             if e0 <= 0:
                 continue
-            pk = [a * vec(Hk, [c])[0] for a, Hk in zip(alphas, H)]
-            err_with = np.array([float(np.sum(wh * np.abs(p - p0) ** 2)) for p in pk])
-            err_without = np.array([float(np.sum(wh * np.abs(p) ** 2)) for p in pk])
-            share = float(np.sum(lw * (err_with < err_without)))
+            pk = np.array([a * vec(Hk, [c])[0] for a, Hk in zip(alphas, H)])   # lines x sensors
+            # per sensor: no sensor may be made worse, so the order must help on each
+            # sensor where its predicted harmonic is clearly above the noise
+            err_with = wh * np.abs(pk - h0) ** 2
+            err_without = wh * np.abs(pk) ** 2
+            share_s = (lw[:, None] * (err_with < err_without)).sum(axis=0)
+            z_s = wh * np.abs(h0) ** 2
+            names = [s for s in c.sensors if c.name in H[0] and s in H[0][c.name]]
+            material = z_s > Z_MATERIAL
+            reliable = bool(np.all(share_s[material] > KEEP_SHARE)) if np.any(material) else True
             verdicts.append({"element": cand.element, "kind": cand.kind, "order": int(j), "run": c.name,
                              "frequency_hz": float(j * c.freq.get(cand.key, 0.0)), "z": e0,
-                             "helps_share": share,
-                             "expected_error_with": float(np.sum(lw * err_with)) / e0,
-                             "expected_error_without": float(np.sum(lw * err_without)) / e0,
+                             "helps_share": float(np.min(share_s[material])) if np.any(material) else None,
+                             "by_sensor": {n: {"z": float(z), "helps_share": float(sh)}
+                                           for n, z, sh in zip(names, z_s, share_s)},
+                             "expected_error_with": float(np.sum(lw * err_with.sum(axis=1))) / e0,
+                             "expected_error_without": float(np.sum(lw * err_without.sum(axis=1))) / e0,
                              "line_weights": [float(x) for x in lw],
-                             "member_energy": [float(x) / e0 for x in err_without],
-                             "reliable": bool(share > KEEP_SHARE or e0 <= Z_MATERIAL)})
+                             # what the fit runs ask of each line's response (1: the refined model as fitted)
+                             "alpha": [[float(a.real), float(a.imag)] for a in alphas],
+                             "reliable": reliable})
     return verdicts
 
 

@@ -130,3 +130,28 @@ def test_members_are_repeatable_and_within_the_tolerances():
     own = next(iter(a[0]))
     c = transfer.members(doc, {"set": {own: "x"}}, n=4)
     assert all(own not in m for m in c)
+
+
+def test_dynamics_draws_within_their_ranges():
+    from webline.orchestrator.units import quantity
+    doc = yaml.safe_load(EWL.read_text())
+    rng = np.random.default_rng(3)
+    lo, hi = tolerances.DYNAMICS["filter_scale"]
+    seen_order2 = seen_damped = 0
+    for _ in range(40):
+        s = tolerances.draw_dynamics(rng, doc)
+        for lc, spec in doc["sensors"].items():
+            tau0 = float(quantity((spec or {}).get("filter", "5 ms"), "time"))
+            tau = float(quantity(s[f"sensors.{lc}.filter"], "time"))
+            assert lo * tau0 * (1 - 1e-3) <= tau <= hi * tau0 * (1 + 1e-3)
+            if f"sensors.{lc}.filter_order" in s:
+                seen_order2 += 1
+                assert 0.5 <= float(s[f"sensors.{lc}.filter_damping"]) <= 0.9
+        for el in doc["drives"]["speed_loops"]:
+            assert 0.0 <= float(quantity(s[f"drives.speed_loops.{el}.current_lag"], "time")) <= 5e-3
+        seen_damped += "web.damping" in s
+    # both branches of each choice are drawn
+    assert 0 < seen_order2 < 40 * len(doc["sensors"]) and 0 < seen_damped < 40
+    # every draw is a layout the loader accepts
+    from webline.orchestrator.layout import load_layout
+    load_layout(EWL, tolerances.draw_dynamics(np.random.default_rng(4), doc))
