@@ -20,6 +20,7 @@ import copy
 import logging
 import tempfile
 import time as _time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,31 @@ log = logging.getLogger("webline.diagnose")
 
 class SimulationFailed(RuntimeError):
     pass
+
+
+class RunColumns(Mapping):
+    """A simulation's columns on the run's time grid, interpolated when first read:
+    a diagnosis reads a handful of a simulation's ~50 columns (the load cells, an
+    angle, the line speed), and interpolating all of them cost more than the fast
+    engine's integration."""
+
+    def __init__(self, t_model, cols, t_run):
+        self._t, self._raw, self._t_run, self._done = t_model, cols, t_run, {}
+
+    def __getitem__(self, k):
+        v = self._done.get(k)
+        if v is None:
+            v = self._done[k] = np.interp(self._t_run, self._t, self._raw[k])  # run time is model time
+        return v
+
+    def __contains__(self, k):
+        return k in self._raw
+
+    def __iter__(self):
+        return iter(self._raw)
+
+    def __len__(self):
+        return len(self._raw)
 
 
 @dataclass
@@ -146,8 +172,7 @@ class LineModel:
             raise SimulationFailed(f"simulation of run {run.name}{' (' + label + ')' if label else ''} "
                                    f"failed: {getattr(result, 'message', '')}")
         t, cols = _columns(result)
-        out = {k: np.interp(run.t, t, v) for k, v in cols.items()}  # run time is model time
-        return Sim(system, out, wall)
+        return Sim(system, RunColumns(t, cols, np.asarray(run.t, float)), wall)
 
     def _simulate_fast(self, run, doc=None, edits=(), label=""):
         from webline.orchestrator import engine
