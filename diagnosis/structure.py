@@ -96,8 +96,12 @@ def triggers(d, left):
             # under the tension loops) is what the form gets wrong
             for o in e.get("by_order", []):
                 if o["significant"] and o["share_left"] is not None and o["share_left"] > ORDER_LEFT_SHARE:
-                    out.append(f"{e['kind']} of {e['element']}: order {o['order']} keeps "
-                               f"{100 * o['share_left']:.0f} % of its harmonic on {s} after refinement")
+                    if o["share_left"] > 1.0:   # the refined model put more there than it took away
+                        out.append(f"{e['kind']} of {e['element']}: order {o['order']}'s harmonic on {s} "
+                                   f"has {o['share_left']:.3g}x its nominal energy after refinement")
+                    else:
+                        out.append(f"{e['kind']} of {e['element']}: order {o['order']} keeps "
+                                   f"{100 * o['share_left']:.0f} % of its harmonic on {s} after refinement")
     for r in getattr(d, "rejected", []):
         if r.get("stage") == "refine check" and r["kind"] in ("eccentricity", "out_of_round"):
             out.append(f"{r['kind']} of {r['element']} rejected by the check ({r.get('reason')})")
