@@ -38,7 +38,6 @@ is not reliable. Only the held-out runs' conditions
 (speed profile, roll radius) are used, never their data.
 """
 import logging
-import math
 
 import numpy as np
 

@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from records import measured_run
 
 from webline.diagnosis import claims
 from webline.diagnosis import estimate as est
@@ -215,10 +216,8 @@ def test_form_feedforward_none_found_and_run_out_recovered(tmp_path, monkeypatch
     about the diagnosis, and keeps to a 20 s record at 250 Hz."""
     import yaml
     import webline.orchestrator.master as master
-    from webline.orchestrator.layout import load_system
     from webline.orchestrator.reference import simulate_reference
     from webline.diagnosis.pipeline import diagnose
-    from webline.diagnosis.runs import _experiment_overrides
 
     C = [0.30e-3, 0.65e-3, 0.12e-3]
     psi = [0.4, -1.0, 2.0]
@@ -227,16 +226,8 @@ def test_form_feedforward_none_found_and_run_out_recovered(tmp_path, monkeypatch
     tset["path.unwind.eccentricity"] = {"C": [f"{c * 1e3} mm" for c in C], "psi": [f"{p} rad" for p in psi]}
     (tmp_path / "truth.yaml").write_text(yaml.safe_dump({"base": str(EWL), "set": tset}))
     for name, speed, dur, seed in (("r1", "200 ft/min", "20 s", 11), ("h1", "170 ft/min", "12 s", 12)):
-        exp = {"duration": dur, "line_speed": speed}
-        system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp, "<run>", {}))
-        system.experiment.output_interval = 1.0 / 250.0
-        res = simulate_reference(system)
-        t = np.asarray(res.time)
-        rng = np.random.default_rng(seed)
-        cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc15", "lc19")}
-        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
-                   header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
-        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp}))
+        measured_run(tmp_path, name, tmp_path / "truth.yaml", {"duration": dur, "line_speed": speed}, seed=seed,
+                     simulate=simulate_reference)
 
     monkeypatch.setattr(master, "simulate", lambda system, fmu_paths=None, progress=False, **kw:
                         simulate_reference(system))
@@ -276,30 +267,16 @@ def test_runs_agree_in_the_chosen_form(tmp_path):
     runs) and must agree with each other and with the truth: the amplitude is
     not flagged for a disagreement of the form that was replaced."""
     import yaml
-    from webline.orchestrator import engine
-    from webline.orchestrator.layout import load_system
     from webline.diagnosis.pipeline import diagnose
-    from webline.diagnosis.runs import _experiment_overrides
 
     C = [0.30e-3, 0.65e-3]
     loops = ("unwind", "sw_leader", "sw_follower", "pull_roll", "rewind")
     tset = {f"drives.speed_loops.{e}.feedforward": False for e in loops}
     tset["path.unwind.eccentricity"] = {"C": [f"{c * 1e3} mm" for c in C], "psi": ["0.4 rad", "-1.0 rad"]}
     (tmp_path / "truth.yaml").write_text(yaml.safe_dump({"base": str(EWL), "set": tset}))
-    runs = []
-    for name, speed, seed in (("r100", "100 ft/min", 21), ("r200", "200 ft/min", 22)):
-        exp = {"duration": "24 s", "line_speed": speed}
-        system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp, "<run>", {}))
-        system.experiment.output_interval = 1.0 / 250.0
-        res = engine.simulate(system)
-        assert res.ok, res.message
-        t = np.asarray(res.time)
-        rng = np.random.default_rng(seed)
-        cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc15", "lc19")}
-        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
-                   header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
-        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp}))
-        runs.append(tmp_path / f"{name}.yaml")
+    runs = [measured_run(tmp_path, name, tmp_path / "truth.yaml", {"duration": "24 s", "line_speed": speed},
+                         seed=seed)
+            for name, speed, seed in (("r100", "100 ft/min", 21), ("r200", "200 ft/min", 22))]
     rep = diagnose(EWL, runs, out=tmp_path / "out",
                    options=Options(fmu_paths={}, jobs=1, max_structures=2, harmonics=2, confirm=False))
     eff = rep["effects"][0]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from records import measured_run
 
 EWL = Path(__file__).resolve().parents[1] / "scenarios" / "ewl.yaml"
 INCH = 0.0254
@@ -17,10 +18,7 @@ INCH = 0.0254
 
 def test_unwind_radius_off_by_1_5_percent_is_corrected_per_run(tmp_path):
     import yaml
-    from webline.orchestrator import engine
-    from webline.orchestrator.layout import load_system
     from webline.diagnosis.pipeline import Options, diagnose
-    from webline.diagnosis.runs import _experiment_overrides
 
     C = [0.40e-3, 0.15e-3]
     psi = [0.7, -1.2]
@@ -30,16 +28,7 @@ def test_unwind_radius_off_by_1_5_percent_is_corrected_per_run(tmp_path):
     (tmp_path / "truth.yaml").write_text(yaml.safe_dump({"base": str(EWL), "set": tset}))
     exp_file = {"duration": "30 s", "line_speed": "200 ft/min", "roll_radius": {"unwind": f"{R_file:.9g} m"}}
     exp_true = dict(exp_file, roll_radius={"unwind": f"{R_true:.9g} m"})
-    system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp_true, "<run>", {}))
-    system.experiment.output_interval = 1.0 / 250.0
-    res = engine.simulate(system)
-    assert res.ok, res.message
-    t = np.asarray(res.time)
-    rng = np.random.default_rng(5)
-    cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc15", "lc19")}
-    np.savetxt(tmp_path / "r1.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
-               header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
-    (tmp_path / "r1.yaml").write_text(yaml.safe_dump({"data": "r1.csv", "experiment": exp_file}))
+    measured_run(tmp_path, "r1", tmp_path / "truth.yaml", exp_file, exp_true=exp_true, seed=5)
 
     rep = diagnose(EWL, [tmp_path / "r1.yaml"], out=tmp_path / "out",
                    options=Options(fmu_paths={}, jobs=1, harmonics=2, confirm=False, structure=False))
@@ -66,10 +55,7 @@ def test_pulse_angle_also_sets_the_run_radius_the_model_turns_with(tmp_path):
     corrected until the model turns with the pulses, on the fit run and on the
     held-out run, from each run's own pulses."""
     import yaml
-    from webline.orchestrator import engine
-    from webline.orchestrator.layout import load_system
     from webline.diagnosis.pipeline import Options, diagnose
-    from webline.diagnosis.runs import _experiment_overrides
     from webline.diagnosis.synthetic import pulse_train
 
     C = [0.40e-3]
@@ -80,17 +66,9 @@ def test_pulse_angle_also_sets_the_run_radius_the_model_turns_with(tmp_path):
     for i, (name, (fpm, R_true)) in enumerate(runs.items()):
         exp_file = {"duration": "30 s", "line_speed": f"{fpm} ft/min", "roll_radius": {"unwind": f"{R_file:.9g} m"}}
         exp_true = dict(exp_file, roll_radius={"unwind": f"{R_true:.9g} m"})
-        system = load_system(tmp_path / "truth.yaml", _experiment_overrides(exp_true, "<run>", {}))
-        system.experiment.output_interval = 1.0 / 250.0
-        res = engine.simulate(system)
-        assert res.ok, res.message
-        t = np.asarray(res.time)
-        rng = np.random.default_rng(7 + i)
-        cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, 0.3, len(t)) for lc in ("lc9", "lc19")}
-        cols["unwind.pulse"] = pulse_train(np.asarray(res["unwind.theta"]))
-        np.savetxt(tmp_path / f"{name}.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
-                   header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
-        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp_file}))
+        measured_run(tmp_path, name, tmp_path / "truth.yaml", exp_file, exp_true=exp_true, seed=7 + i,
+                     sensors=("lc9", "lc19"),
+                     extra=lambda res: {"unwind.pulse": pulse_train(np.asarray(res["unwind.theta"]))})
 
     rep = diagnose(EWL, [tmp_path / "fit.yaml"], holdout=[tmp_path / "held.yaml"], out=tmp_path / "out",
                    options=Options(fmu_paths={}, jobs=1, harmonics=2, confirm=False, structure=False))

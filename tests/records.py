@@ -1,0 +1,34 @@
+"""Measured records for the diagnosis tests: a truth layout simulated under a run's
+conditions, its load cells with white noise, written as a data file and a run file
+the way a user hands them to ``webline diagnose``."""
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+
+def measured_run(folder, name, truth_layout, exp, *, exp_true=None, seed=0, noise_N=0.3, fs=250.0,
+                 sensors=("lc9", "lc15", "lc19"), simulate=None, extra=None):
+    """Write ``<name>.csv`` and ``<name>.yaml`` in ``folder``; return the run file's path.
+
+    ``exp`` is the run file's experiment block, ``exp_true`` the one the truth ran
+    under (default ``exp``: e.g. another start radius than the run sheet says);
+    ``simulate`` (default the fast engine) runs the truth system; ``extra(res)``
+    gives more data columns ({header: array})."""
+    from webline.orchestrator import engine
+    from webline.orchestrator.layout import load_system
+    from webline.diagnosis.runs import _experiment_overrides
+
+    folder = Path(folder)
+    system = load_system(truth_layout, _experiment_overrides(exp_true or exp, "<run>", {}))
+    system.experiment.output_interval = 1.0 / fs
+    res = (simulate or engine.simulate)(system)
+    assert getattr(res, "ok", True), res.message
+    t = np.asarray(res.time)
+    rng = np.random.default_rng(seed)
+    cols = {f"{lc} [N]": np.asarray(res[f"{lc}.T"]) + rng.normal(0, noise_N, len(t)) for lc in sensors}
+    cols.update(extra(res) if extra else {})
+    np.savetxt(folder / f"{name}.csv", np.column_stack([t] + list(cols.values())), delimiter=",",
+               header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
+    (folder / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp}))
+    return folder / f"{name}.yaml"
