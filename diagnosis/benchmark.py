@@ -620,13 +620,6 @@ def _match_detail(mode, t, r, truth):
         d["f_rel_error"] = abs(f_rep - f_true) / f_true if f_rep and f_true > 0 else None
         j = int(t.get("dominant_order") or (int(np.argmax(t["C_m"])) + 1))
         h = {int(x["order"]): x for x in (r.get("harmonics") or [])}
-        if mode == "ambiguous":
-            # the report's amplitude if it is the true element (its own fit, among the candidates)
-            ct = next((c for c in r.get("candidates") or [] if isinstance(c, dict)
-                       and c.get("element") == t["element"] and c.get("harmonics")), None)
-            if ct is not None:
-                h = {int(x["order"]): x for x in ct["harmonics"]}
-                d["amplitude_of"] = "candidate"
         C_true = t["C_m"][j - 1]
         d["dominant_order"] = j
         if j in h and C_true > 0:

@@ -194,11 +194,6 @@ def _cand_entry(d, r):
            "log10_p": r["score"]["logp"],
            "verified_residual_energy": r.get("verify"),
            "fundamental_hz": float(np.mean([c.freq[k.key] for c in d.ctx if c.fit]))}
-    X = r.get("X")
-    if X is not None:
-        # the run-out if it is this element (its own fit): a dial gauge on any candidate can check it
-        out["harmonics"] = [{"order": j + 1, "amplitude": float(abs(X[j])), "phase": float(np.angle(X[j]))}
-                            for j in range(len(X)) if abs(X[j]) > 0]
     if r.get("td_sse") is not None:
         out["residual_share_left"] = float(r["td_sse"])
     return out

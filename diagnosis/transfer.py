@@ -84,6 +84,17 @@ def _without_effects(d, doc, effs):
     return doc
 
 
+def _variance(fit, s):
+    """Variance of sensor ``s``'s data over the fit runs (the NRMSE's denominator)."""
+    num = den = 0.0
+    for c in fit:
+        if s in c.sensors:
+            y = c.meas[s]
+            num += float(np.sum((y - np.mean(y)) ** 2))
+            den += len(y)
+    return max(num / den, 1e-300) if den else 1.0
+
+
 def _weights(fit, s, f):
     """1/S(f) of sensor ``s`` from the first fit run that has it (the held-out data are not read)."""
     for c in fit:
@@ -154,30 +165,30 @@ def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
             h0, wh = vec(H[0], [c])
             if len(h0) == 0:
                 continue
-            e0 = float(np.sum(wh * np.abs(h0) ** 2))   # the refined layout predicts h0
+            names = [s for s in c.sensors if c.name in H[0] and s in H[0][c.name]
+                     and _weights(fit, s, j * c.freq.get(cand.key, 0.0)) is not None]
+            # what a harmonic adds to a sensor's NRMSE^2: its power |Y|^2 / 2 over the
+            # sensor's variance (fit runs; the held-out data are not read)
+            wv = np.array([0.5 / _variance(fit, s) for s in names])
+            e0 = float(np.sum(wh * np.abs(h0) ** 2))   # z of the refined layout's prediction h0
             if e0 <= 0:
                 continue
             pk = np.array([a * vec(Hk, [c])[0] for a, Hk in zip(alphas, H)])   # lines x sensors
-            # per sensor: no sensor may be made worse, so the order must help on each
-            # sensor where its predicted harmonic is clearly above the noise
-            err_with = wh * np.abs(pk - h0) ** 2
-            err_without = wh * np.abs(pk) ** 2
-            share_s = (lw[:, None] * (err_with < err_without)).sum(axis=0)
+            d_s = wv * (np.abs(pk - h0) ** 2 - np.abs(pk) ** 2)   # NRMSE^2 change per line and sensor
+            helps = d_s.sum(axis=1) < 0.0
+            share = float(np.sum(lw * helps))
             z_s = wh * np.abs(h0) ** 2
-            names = [s for s in c.sensors if c.name in H[0] and s in H[0][c.name]]
-            material = z_s > Z_MATERIAL
-            reliable = bool(np.all(share_s[material] > KEEP_SHARE)) if np.any(material) else True
             verdicts.append({"element": cand.element, "kind": cand.kind, "order": int(j), "run": c.name,
                              "frequency_hz": float(j * c.freq.get(cand.key, 0.0)), "z": e0,
-                             "helps_share": float(np.min(share_s[material])) if np.any(material) else None,
-                             "by_sensor": {n: {"z": float(z), "helps_share": float(sh)}
-                                           for n, z, sh in zip(names, z_s, share_s)},
-                             "expected_error_with": float(np.sum(lw * err_with.sum(axis=1))) / e0,
-                             "expected_error_without": float(np.sum(lw * err_without.sum(axis=1))) / e0,
+                             "helps_share": share,
+                             "nrmse2_change": float(np.sum(lw * d_s.sum(axis=1))),
+                             "by_sensor": {n: {"z": float(z), "helps_share": float(np.sum(lw * (d < 0))),
+                                               "nrmse2_change": float(np.sum(lw * d))}
+                                           for n, z, d in zip(names, z_s, d_s.T)},
                              "line_weights": [float(x) for x in lw],
                              # what the fit runs ask of each line's response (1: the refined model as fitted)
                              "alpha": [[float(a.real), float(a.imag)] for a in alphas],
-                             "reliable": reliable})
+                             "reliable": bool(share > KEEP_SHARE or e0 <= Z_MATERIAL)})
     return verdicts
 
 
