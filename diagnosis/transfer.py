@@ -9,7 +9,7 @@ correct run-out can then predict a line the held-out data do not have
 0.55 mm, at 17 Hz in the held-out run next to a 17.6 Hz idler mode of the
 model; held-out lc9 NRMSE 1.00 -> 1.20 with it, 0.98 without).
 
-The screen asks, per reported order, held-out run and sensor, whether putting
+The screen asks, per reported order and held-out run, whether putting
 the order into the prediction lowers the error over lines a data sheet cannot
 tell from the refined model (:data:`diagnosis.tolerances.DATA_SHEET` and
 :data:`~diagnosis.tolerances.DYNAMICS`) and over the other model forms that fit
@@ -25,16 +25,16 @@ about as well:
   k predicts ``alpha_k H_k`` on the held-out run where the refined layout
   predicts ``H_0``; the lines are weighted by how well ``alpha_k G_k``
   explains the fit runs (chi-square over sensors and runs, tempered);
-* with the order the error on a sensor is ``|alpha_k H_k - H_0|^2``, without
-  it ``|alpha_k H_k|^2``.
+* with the order, line k's held-out NRMSE^2 changes by the sum over sensors
+  of ``(|alpha_k H_k - H_0|^2 - |alpha_k H_k|^2) / 2`` over each sensor's
+  variance (fit runs).
 
-An order that helps in at most ``KEEP_SHARE`` of the weighted lines on some
-sensor of a held-out run, where its predicted harmonic is clearly above the
-noise (``Z_MATERIAL``), leaves the refined layout (its estimate stays in the
-report, marked). The layout without it must still pass the check of
-:mod:`diagnosis.claims` on the fit runs, against the model without the
-effect; if not, the order stays and the report says its held-out prediction
-is not reliable. Only the held-out runs' conditions
+An order whose predicted harmonic is clearly above the noise (``Z_MATERIAL``)
+and that lowers that sum in at most ``KEEP_SHARE`` of the weighted lines
+leaves the refined layout (its estimate stays in the report, marked). The
+layout without it must still pass the check of :mod:`diagnosis.claims` on the
+fit runs, against the model without the effect; if not, the order stays and
+the report says its held-out prediction is not reliable. Only the held-out runs' conditions
 (speed profile, roll radius) are used, never their data.
 """
 import logging
