@@ -548,11 +548,17 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
     simulated residual) of the estimates as modelled and the form's harmonic
     re-estimate ``X1s``. Returns (Xs by element, sims)."""
     from webline.diagnosis import regress
-    use = [(cand, X0) for cand, X0, _ in effs if cand.element in X1s]
+    use = [(cand, X0, fe) for cand, X0, fe in effs if cand.element in X1s]
     if not use:
         return {}, sim_fit(alt0, f"structure {name} nominal")
-    cands = [cand for cand, _ in use]
-    orders = [[j + 1 for j in np.flatnonzero(np.abs(X0) > 0)] for _, X0 in use]
+    cands = [cand for cand, _, _ in use]
+    # the orders kept as modelled and every order the family fit found strong: an order
+    # whose response the layout's form got wrong may have been dropped there (independent
+    # c20: an unwind's order 1, 0.32 mm, pruned in the layout's form); the form's own
+    # fit prunes again by simulation
+    orders = [sorted({j + 1 for j in np.flatnonzero(np.abs(X0) > 0)} | _strong_orders(fe, cand, len(X0)))
+              for cand, X0, fe in use]
+    use = [(cand, X0) for cand, X0, _ in use]
     starts = []
     for label, Xs in (("as modelled", [X0 for _, X0 in use]), ("re-estimate", [X1s[c.element] for c in cands])):
         sims = sim_fit(with_all(alt0, dict(zip([c.element for c in cands], Xs))), f"structure {name} {label}")
@@ -562,6 +568,17 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
     Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=1, sims=sims,
                                             label=f"structure {name}", drop_rounds=1)
     return dict(zip([c.element for c in cands], Xs)), sims2
+
+
+def _strong_orders(fe, cand, n):
+    """Orders of ``cand`` the family screen found clearly present (z > 25 per fit run)."""
+    if fe is None:
+        return set()
+    for sc in (fe.get("eff") or {}).get("group", []):
+        if sc.get("cand") is cand:
+            runs = max(1, len(sc.get("fits", {}) or {}))
+            return {int(j) for j, z in (sc.get("z_order") or {}).items() if z > 25.0 * runs and int(j) <= n}
+    return set()
 
 
 def secondaries(d):
