@@ -168,7 +168,7 @@ def per_run_in_form(d, doc, cand, X):
     if len(fit) < 2 or not np.any(np.abs(X) > 0):
         return {}
     j = int(np.argmax(np.abs(X)))
-    wo = transfer._without_effects(d, doc, [(cand, X)])
+    wo = transfer.without_effects(d, doc, [(cand, X)])
     sw = d._simulate_all(doc, "per-run estimate, with", fit)
     so = d._simulate_all(wo, "per-run estimate, without", fit)
     out = {}

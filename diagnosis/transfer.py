@@ -75,7 +75,7 @@ def _with_set(doc, s):
     return doc
 
 
-def _without_effects(d, doc, effs):
+def without_effects(d, doc, effs):
     """``doc`` with each effect's Fourier series back at the layout's own."""
     base = d.model.copy_doc()
     for cand, X in effs:
@@ -220,7 +220,7 @@ def screen(d):
     G, H, failed, before, M = {}, {}, set(), None, None
     for k, dk in enumerate(docs):
         jobs = [(c.run, dd, f"transfer line {k} {which}")
-                for which, dd in (("with", dk), ("without", _without_effects(d, dk, effs))) for c in d.ctx]
+                for which, dd in (("with", dk), ("without", without_effects(d, dk, effs))) for c in d.ctx]
         sims = d.model.simulate_many(jobs)
         if any(isinstance(x, Exception) for x in sims):
             failed.add(k)
@@ -247,6 +247,7 @@ def screen(d):
                                    [H[cand.element][k] for k in ks], cand, orders, fit, hold, prior)
     d.transfer = {"members": len(ks), "forms": [n for n, _ in getattr(d, "form_members", []) or []],
                   "failed_members": len(failed), "tolerances": dict(tolerances.DATA_SHEET),
+                  "dynamics": {k: list(v) for k, v in tolerances.DYNAMICS.items()},
                   "keep_share": KEEP_SHARE, "z_material": Z_MATERIAL, "orders": verdicts, "dropped": []}
     drop = {}
     for v in verdicts:
@@ -286,7 +287,8 @@ def screen(d):
         d.transfer["dropped"].append({"element": el, "orders": sorted(js)})
         txt = "; ".join(f"order {v['order']} at {v['frequency_hz']:.3g} Hz in run {v['run']} "
                         f"(helps in {100 * v['helps_share']:.0f} % of the lines)" for v in worst)
-        d.notes.append(f"{el}: left out of the refined layout, their estimates kept in the report: {txt}. "
+        d.notes.append(f"{el}: orders {', '.join(map(str, sorted(js)))} left out of the refined layout "
+                       f"(their estimates stay in the report): {txt}. "
                        f"Over lines within the data sheet's tolerances the fit runs do not tell how the line "
                        f"answers there (a lightly damped mode nearby); a run at that speed would")
     log.info("  transfer: dropped %s", {k: sorted(v) for k, v in drop.items()})
