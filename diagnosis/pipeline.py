@@ -635,17 +635,15 @@ class Diagnosis:
                 for k in rolls:
                     if (c.name, k.key) not in todo or k.theta not in sim.columns:
                         continue
-                    if c.theta_src[k.key] == "model":
+                    from_model = c.theta_src[k.key] == "model"
+                    if from_model:   # a data angle stays the run's angle
                         c.theta[k.key] = sim.columns[k.theta]
                         c.freq[k.key] = self._mean_freq(c, c.theta[k.key])
                         c.kappa[k.key] = 0.0
-                        if it == 3:
-                            continue
-                        dk = self._refine_kappa_joint([c], k, span=0.25 * self.opt.kappa_span, strict=False)
-                    else:
-                        c.data_scale[k.key] = dk = 0.0 if it == 3 else self._data_speed_scale(c, k, sim)
-                        if it == 3:
-                            continue
+                    if it == 3:
+                        continue
+                    dk = (self._refine_kappa_joint([c], k, span=0.25 * self.opt.kappa_span, strict=False)
+                          if from_model else self._data_speed_scale(c, k, sim))
                     if abs(dk) < 1e-4:
                         continue
                     key = f"experiment.roll_radius.{k.element}"
