@@ -39,6 +39,9 @@ class SpeedPI(ElementSlave):
         Var("tau_current", "s", 0.0, "Time constant of the drive's current loop, a first-order lag on the "
             "torque (0: none, tau is the PI law)", check=non_negative),
         Var("tau0", "N.m", 0.0, "Initial torque of the current-loop lag (tau_current > 0)", check=finite),
+        Var("torque_noise", "N.m", 0.0, "RMS of the drive's broadband torque ripple added to tau (0: none)",
+            check=non_negative),
+        Var("seed", "1", 0.0, "Seed of the torque ripple (an integer)", check=finite),
     )
     INPUTS = (
         Var("v_ref", "m/s", 0.0, "Web speed reference"),
@@ -58,4 +61,5 @@ class SpeedPI(ElementSlave):
 
     def make_model(self):
         return SpeedPIModel(self.K_ref, self.zeta, self.w_ld, self.tau_min, self.tau_max, self.feedforward,
-                            self.b_ff, self.I0, self.acc_ff, self.tau_current, self.tau0)
+                            self.b_ff, self.I0, self.acc_ff, self.tau_current, self.tau0,
+                            self.torque_noise, self.seed)

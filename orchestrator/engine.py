@@ -173,7 +173,8 @@ class _Builder:
                 raise EngineError(f"component {comp.name!r}: the fast engine has no code for model {comp.model!r} "
                                   f"(known: {', '.join(sorted(GENERATORS))})")
             self.gens.append(cls(self, ci, comp, model, ref.offsets[ci][0]))
-        self.noise = [(g.noise_slot, int(g.m.seed), float(g.m.noise_std)) for g in self.gens
+        # held Gaussian sources (load-cell noise, drive torque ripple): (slot, seed, std)
+        self.noise = [(g.noise_slot, int(g.m.seed), float(g.noise_std)) for g in self.gens
                       if getattr(g, "noise_slot", None) is not None]
 
     def param(self, ci, name, value):
@@ -302,6 +303,7 @@ class _LoadCell(_Gen):
         elif self.nx == 2:
             self.w_c = self.P("w_c", getattr(m, "w_c", 1.0 / m.tau_filter))
             self.zeta = self.P("filter_damping", getattr(m, "filter_damping", 0.707))
+        self.noise_std = m.noise_std
         self.noise_slot = self.b.param(self.ci, "noise", 0.0) if m.noise_std != 0.0 else None
 
     def reading(self, body):
@@ -356,6 +358,8 @@ class _SpeedPI(_Gen):
         self.lag = bool(getattr(m, "lag", False))
         if self.lag:
             self.tau_current = self.P("tau_current", m.tau_current)
+        self.noise_std = getattr(m, "torque_noise", 0.0)
+        self.noise_slot = self.b.param(self.ci, "noise", 0.0) if self.noise_std != 0.0 else None
 
     def omega_ref(self, body):
         return self.tmp(body, "omega_ref", lambda: f"({self.u(body, 'v_ref')} + {self.u(body, 'v_trim')}) / "
@@ -381,7 +385,8 @@ class _SpeedPI(_Gen):
         if name == "omega_ref":
             return self.omega_ref(body)
         if name == "tau":
-            return self.x(1) if self.lag else f"{self.law(body)[1]}[0]"
+            tau = self.x(1) if self.lag else f"{self.law(body)[1]}[0]"
+            return f"{tau} + p[{self.noise_slot}]" if self.noise_slot is not None else tau
         return super().output(body, name)
 
     def derivatives(self, body):
@@ -909,7 +914,7 @@ def simulate_batch(systems, t_eval=None, h_max=H_MAX, compiled=None):
             raise ValueError(f"simulate_batch: variants differ in structure ({s.meta.get('layout', '')}); "
                              "use simulate() per variant")
         if c.noise != base.noise:
-            raise ValueError("simulate_batch: variants differ in load-cell noise (seed or std)")
+            raise ValueError("simulate_batch: variants differ in noise (a load cell's or a drive's torque ripple: seed or std)")
     compile_s = sum(c.setup_s + c.load_s for c in comps)
     exp = systems[0].experiment
     t_eval = output_times(exp) if t_eval is None else t_eval

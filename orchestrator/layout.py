@@ -735,7 +735,7 @@ class _Builder:
     def _speed_loops(self):
         op = self.op
         self.speed_pi = {}
-        for name, loop in self.L.drives.speed_loops.items():
+        for k, (name, loop) in enumerate(self.L.drives.speed_loops.items(), start=1):
             i = self.index[name]
             e = self.L.path[i]
             R = self.radius[i]
@@ -759,6 +759,10 @@ class _Builder:
             if loop.current_lag > 0.0:
                 params["tau_current"] = loop.current_lag
                 params["tau0"] = tau  # the lag starts at the operating-point torque
+            if loop.torque_noise > 0.0:
+                # seeds apart from the load cells' (1, 2, ...): the ripple is not the sensor noise
+                params.update({"torque_noise": loop.torque_noise,
+                               "seed": float(loop.noise_seed if loop.noise_seed is not None else 1000 + k)})
             inputs = {"v_ref": op.v[i], "v_trim": 0.0, "R": R, "omega": op.omega[i], "J": J,
                       "T_in": T_in, "T_out": T_out}
             comp = f"{name}_speed_pi"

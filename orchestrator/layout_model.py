@@ -124,6 +124,7 @@ Angle = Q("angle")
 WrapAngle = Q("angle", ge=0, le=2 * math.pi)
 NonNegAngle = Q("angle", ge=0)
 PositiveTorque = Q("torque", gt=0)
+NonNegTorque = Q("torque", ge=0)
 Friction = Q("rot_damping", ge=0)
 RotStiffness = Q("rot_stiffness", gt=0)
 
@@ -277,6 +278,9 @@ class SpeedLoop(Strict):
     current_lag: NonNegTime = _doc("Time constant of the drive's current loop: a first-order lag on the torque "
                                    "(0: none)", default=0.0)
     torque_limit: Optional[PositiveTorque] = _doc("Symmetric motor torque limit (default none)", default=None)
+    torque_noise: NonNegTorque = _doc("RMS of the drive's broadband torque ripple (current ripple, PWM), white "
+                                      "and held between communication points (0: none)", default=0.0)
+    noise_seed: Optional[int] = _doc("Seed of the torque ripple (default: from the loop's position)", default=None)
     drive: Optional[NonIdealDrive] = _doc("Non-ideal drive (default ideal, rigid)", default=None)
 
 

@@ -258,6 +258,12 @@ def solve_reference(system, rtol=1e-8, atol=None, method="LSODA", max_step=np.in
     The integration restarts at every Profile knot (a kink in an input).
     """
     wall = _time.perf_counter()
+    ripple = [c.name for c in system.components if float(c.parameters.get("torque_noise", 0.0) or 0.0) != 0.0]
+    if ripple:
+        # the ripple is held between communication points; a continuous-time solver would
+        # draw a new sample at every evaluation (a rhs discontinuous every microsecond)
+        raise ValueError(f"torque ripple ({', '.join(ripple)}: torque_noise) needs a stepping master: "
+                         f"run it with the fast engine or the co-simulation")
     ref = ReferenceSystem(system)
     exp = system.experiment
     if atol is None:

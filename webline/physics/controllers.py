@@ -12,6 +12,7 @@ saturates in the direction the error pushes it (conditional integration).
 import math
 
 from webline.physics.element import ElementModel, require_finite, require_non_negative, require_positive
+from webline.physics.load_cell import standard_normal
 
 
 def speed_gains(J, K_ref, zeta):
@@ -81,13 +82,21 @@ class SpeedPIModel(ElementModel):
     torque command and the torque output: extra state tau_m
     (:func:`current_lag_rate`, starting at ``tau0``), output tau = tau_m, which then
     depends on no input. 0: the output is the PI law itself (no extra state).
+
+    ``torque_noise`` (N.m rms) adds the drive's broadband torque ripple (current
+    ripple, PWM, commutation) to the torque output: ``standard_normal(seed, t)``
+    of :mod:`webline.physics.load_cell`, held between communication points as a
+    load cell's noise is, so every master draws the same sequence. It excites
+    whatever lightly damped mode the line has (a compliant shaft's torsional
+    mode shows as a fixed-frequency hump in the tensions); the integrator does
+    not see it (the loop cannot know the ripple).
     """
 
     INPUTS = ("v_ref", "v_trim", "R", "omega", "J", "T_in", "T_out", "a_ref")
     OUTPUTS = ("tau", "omega_ref")
 
     def __init__(self, K_ref, zeta=1.1, w_ld=0.0, tau_min=-math.inf, tau_max=math.inf, feedforward=0,
-                 b_ff=0.0, I0=0.0, acc_ff=0, tau_current=0.0, tau0=0.0):
+                 b_ff=0.0, I0=0.0, acc_ff=0, tau_current=0.0, tau0=0.0, torque_noise=0.0, seed=0):
         self.K_ref, self.zeta = K_ref, zeta
         self.w_ld_param = w_ld
         self.w_ld = w_ld if w_ld > 0.0 else (K_ref / (4.0 * zeta * zeta) if zeta > 0.0 else math.nan)
@@ -100,11 +109,14 @@ class SpeedPIModel(ElementModel):
         self.tau_current, self.tau0 = tau_current, tau0
         self.lag = tau_current > 0.0
         self.STATES = ("I", "tau_m") if self.lag else ("I",)
+        self.torque_noise, self.seed = torque_noise, seed
 
     def problems(self):
         p = require_positive([], K_ref=self.K_ref, zeta=self.zeta)
         require_finite(p, w_ld=self.w_ld_param, b_ff=self.b_ff, I0=self.I0, tau0=self.tau0)
-        require_non_negative(p, tau_current=self.tau_current)
+        require_non_negative(p, tau_current=self.tau_current, torque_noise=self.torque_noise)
+        if math.isfinite(self.seed) and self.seed != round(self.seed):
+            p.append(("seed", f"must be an integer (got {self.seed!r})"))
         _limit_problems(p, "tau_min", self.tau_min, "tau_max", self.tau_max)
         for name, value in (("feedforward", self.feedforward_value), ("acc_ff", self.acc_ff_value)):
             if value not in (0.0, 1.0):
@@ -136,9 +148,14 @@ class SpeedPIModel(ElementModel):
                     current_lag_rate(x[1], tau, self.tau_current)]
         return [integral_rate(e, unsat, self.tau_min, self.tau_max)]
 
+    def noise(self, t):
+        if self.torque_noise == 0.0:
+            return 0.0
+        return self.torque_noise * standard_normal(int(self.seed), t)
+
     def outputs(self, t, x, u):
         tau, _, _, omega_ref = self._law(x, u)
-        return [x[1] if self.lag else tau, omega_ref]
+        return [(x[1] if self.lag else tau) + self.noise(t), omega_ref]
 
 
 class TensionPIModel(ElementModel):
