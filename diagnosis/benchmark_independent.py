@@ -113,6 +113,7 @@ class IRunSpec(B.RunSpec):
 class TruthModel:
     forms: dict = field(default_factory=dict)    # drawn model-form differences
     params: dict = field(default_factory=dict)   # drawn parameter scale factors
+    ripple: dict = field(default_factory=dict)   # drive torque ripple: {element: share of R T_max}
 
 
 @dataclass
@@ -143,6 +144,30 @@ def draw_truth_model(r, line_doc):
         "rewind_radius_scale": float(r.uniform(0.98, 1.02)),
     }
     return TruthModel(forms=forms, params=params)
+
+
+RIPPLE_SHARE = (0.002, 0.01)   # torque ripple rms (at 500 Hz) / the element's R T_max, log-uniform
+RIPPLE_FS_HZ = 500.0           # the ripple is white: its rms scales with sqrt(rate / this)
+
+
+def draw_ripple(seed, line_doc):
+    """Each drive's broadband torque ripple (current ripple, PWM), a share of the
+    torque its element's radius makes with the line's highest tension. Drawn from
+    its own stream (the case's other draws stay as they were)."""
+    r = np.random.default_rng([seed, 9006])
+    return {el: _log_uniform(r, *RIPPLE_SHARE) for el in line_doc["drives"]["speed_loops"]}
+
+
+def ripple_set(ripple, facts, T_max, fs_hz, seed):
+    """Dotted ``set`` entries of one run's torque ripple: rms = share R T_max
+    sqrt(fs / RIPPLE_FS_HZ) (a white ripple held at the sample rate keeps its
+    spectral density whatever the rate), a seed per run and drive."""
+    out = {}
+    for k, (el, share) in enumerate(sorted(ripple.items())):
+        rms = share * facts[el]["radius_m"] * T_max * math.sqrt(fs_hz / RIPPLE_FS_HZ)
+        out[f"drives.speed_loops.{el}.torque_noise"] = f"{rms:.4g} N*m"
+        out[f"drives.speed_loops.{el}.noise_seed"] = int((seed + 7919 * (k + 1)) % (2 ** 31 - 1))
+    return out
 
 
 def _q(value, dim):
@@ -229,6 +254,7 @@ def draw_cases(n, seed=0, *, quick=False, layout_doc=None, facts=None):
         effects = []
         for e in c.effects:  # a drive effect moves a share of the *truth's* inertia to the motor
             effects.append(B.draw_drive(r, e.kind, e.element, tdoc) if e.kind in B.DRIVE_KINDS else e)
+        model.ripple = draw_ripple(c.seed, layout_doc)
         out.append(ICase(id=c.id, category=c.category, effects=effects, runs=_draw_runs(r, c.category, quick),
                          seed=c.seed, model=model))
     return out
@@ -354,12 +380,14 @@ def make_case(case, folder, line_doc, fmu_paths=None, *, simulate=None):
                                 {"base": os.path.relpath(line, truth_dir), "set": tset},
                                 "# the nominal line with other forms, other parameters and the hidden effects\n")
     t_gen = time.perf_counter()
+    T_max = max(load_system(line).meta["operating_point"]["T"])
     runs_out = []
     for run in case.runs:
         exp = run_conditions(run)
         texp = copy.deepcopy(exp)
         texp["roll_radius"] = {"unwind": f"{run.unwind_radius_in * B.INCH * run.radius_scale:.6g} m"}
-        system = load_system(truth_layout, B._overrides(texp))
+        rset = ripple_set(case.model.ripple, facts, T_max, run.fs_hz, run.seed)
+        system = load_system(truth_layout, {**B._overrides(texp), **rset})
         t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
         res = simulate(system, t)
         meta = getattr(res, "meta", None) or {}
@@ -401,7 +429,7 @@ def make_case(case, folder, line_doc, fmu_paths=None, *, simulate=None):
                 tau = np.asarray(res[col], float)[st]
                 torque[el] = {"min_Nm": float(tau.min()), "max_Nm": float(tau.max())}
         runs_out.append({"name": run.name, "holdout": run.holdout, "spec": asdict(run), "conditions": exp,
-                         "truth_conditions": texp, "engine": kind, "fundamental_hz": fund,
+                         "truth_conditions": texp, "ripple_set": rset, "engine": kind, "fundamental_hz": fund,
                          "drive_torque": torque, "sensors": sens})
     truth = {"id": case.id, "family": FAMILY, "category": case.category, "seed": case.seed,
              "effects": [B._effect_truth(e, facts) for e in case.effects],
@@ -858,7 +886,7 @@ def drive_detectability(truth, folder, *, simulate=None):
                     continue
                 run = IRunSpec(**{k: v for k, v in r["spec"].items() if k in fields})
                 t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
-                ov = B._overrides(r["truth_conditions"])
+                ov = {**B._overrides(r["truth_conditions"]), **r.get("ripple_set", {})}
                 res = simulate(load_system(truth_layout, ov), t)
                 res0 = simulate(load_system(wo, ov), t)
                 tt = np.asarray(res.time, float)
