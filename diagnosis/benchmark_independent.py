@@ -15,6 +15,9 @@ gets
 * **in parameters**: EA +-15 %, every element's inertia +-30 %, bearing
   friction x0.3-3 (log-uniform), span lengths +-5 %, the start radii of the
   rolls +-2 % (the unwind's per run, against the radius the run file states);
+* **in excitation**: every drive's torque carries a white ripple of 0.2-1 % of
+  its element's R T_max (:func:`draw_ripple`, :func:`ripple_set`), as real
+  drives do; a lightly damped mode (a compliant shaft) shows through it;
 * **in simulator**: the truth is the monolithic engine (:func:`simulate_truth`:
   ``orchestrator.engine.simulate`` when it exists, else the scipy reference
   :func:`orchestrator.reference.simulate_reference`), never the co-simulation
@@ -773,6 +776,24 @@ def whitened_snr(delta, noise, fs, band=None):
     return snr, d_rms, n_rms
 
 
+def stochastic_deflection(delta, noise, fs, band):
+    """Deflection of an energy detector for ``delta`` taken as a random signal
+    (a mode excited by torque ripple: no diagnosis knows the ripple's sequence,
+    only its spectrum): sqrt(sum_k (P_k / S_k)^2) over the band's rfft bins, P_k
+    and S_k the smoothed periodograms of the difference and of the error. A
+    matched filter (:func:`whitened_snr`) needs the waveform; this needs only
+    the spectrum, and is the bound for a screen of residual spectra."""
+    delta = np.asarray(delta, float) - np.mean(delta)
+    noise = np.asarray(noise, float) - np.mean(noise)
+    n = len(delta)
+    if n < 8:
+        return 0.0
+    P, S = _noise_psd(delta, fs, n), _noise_psd(noise, fs, n)
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    m = (f >= band[0]) & (f <= band[1]) & (f > 0)
+    return float(np.sqrt(np.sum((P[m] / np.maximum(S[m], 1e-300)) ** 2))) if m.any() else 0.0
+
+
 def near_zero_windows(t, tau, half=REVERSAL_WINDOW_S, eps=REVERSAL_EPS_NM, rel=REVERSAL_REL):
     """(mask, episodes): samples within ``half`` of a time the drive torque is at
     zero - within max(eps, rel * its range) of it, or changing sign between two
@@ -809,7 +830,7 @@ def effect_visibility(kind, t, with_T, without_T, noise_T, fs, *, torsional_hz=N
         band = (torsional_hz * (1 - BAND_REL), torsional_hz * (1 + BAND_REL))
         snr, d, nn = whitened_snr(delta, noise, fs, band)
         out.update(where=f"{band[0]:.3g}-{band[1]:.3g} Hz", snr_where=snr, delta_rms_where_N=d,
-                   noise_rms_where_N=nn)
+                   noise_rms_where_N=nn, deflection_where=stochastic_deflection(delta, noise, fs, band))
     elif kind == "backlash":
         mask, episodes = near_zero_windows(t, tau) if tau is not None else (np.zeros(len(t), bool), 0)
         if mask.any():
@@ -832,10 +853,15 @@ def _combine(per):
     """Detectability over load cells and fit runs: SNRs add in quadrature (independent errors)."""
     snr = math.sqrt(sum(v["snr_where"] ** 2 for v in per))
     snr_all = math.sqrt(sum(v["snr_all"] ** 2 for v in per))
+    extra = {}
+    if all("deflection_where" in v for v in per):
+        extra["deflection_where"] = math.sqrt(sum(v["deflection_where"] ** 2 for v in per))
+    if all("snr_where_without_ripple" in v for v in per):
+        extra["snr_where_without_ripple"] = math.sqrt(sum(v["snr_where_without_ripple"] ** 2 for v in per))
     # detectable: the effect's own signature (where it acts) stands out of the error; visible
     # overall only: the data differ (e.g. a shaft changing how run-out passes) but not there
     return {"snr_where": snr, "snr_all": snr_all, "threshold": DETECT_SNR, "detectable": bool(snr >= DETECT_SNR),
-            "visible_overall": bool(snr_all >= DETECT_SNR)}
+            "visible_overall": bool(snr_all >= DETECT_SNR), **extra}
 
 
 def _layout_without(truth, line_doc, line_path, index):
@@ -886,9 +912,13 @@ def drive_detectability(truth, folder, *, simulate=None):
                     continue
                 run = IRunSpec(**{k: v for k, v in r["spec"].items() if k in fields})
                 t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
-                ov = {**B._overrides(r["truth_conditions"]), **r.get("ripple_set", {})}
+                ov0 = B._overrides(r["truth_conditions"])
+                ov = {**ov0, **r.get("ripple_set", {})}
                 res = simulate(load_system(truth_layout, ov), t)
                 res0 = simulate(load_system(wo, ov), t)
+                # the same without the drives' torque ripple: what the effect shows deterministically
+                quiet = (simulate(load_system(truth_layout, ov0), t), simulate(load_system(wo, ov0), t)) \
+                    if r.get("ripple_set") else None
                 tt = np.asarray(res.time, float)
                 settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)
                 rng = np.random.default_rng(run.seed)
@@ -901,6 +931,12 @@ def drive_detectability(truth, folder, *, simulate=None):
                     v = effect_visibility(e["kind"], tt[settle], y[settle], np.asarray(res0[f"{lc}.T"], float)[settle],
                                           (m - y)[settle], run.fs_hz, tau=tau,
                                           torsional_hz=(e.get("drive") or {}).get("torsional_hz"))
+                    if quiet is not None:
+                        v["snr_where_without_ripple"] = effect_visibility(
+                            e["kind"], tt[settle], np.asarray(quiet[0][f"{lc}.T"], float)[settle],
+                            np.asarray(quiet[1][f"{lc}.T"], float)[settle], (m - y)[settle], run.fs_hz,
+                            tau=np.asarray(quiet[0][col], float)[settle] if col in quiet[0] else None,
+                            torsional_hz=(e.get("drive") or {}).get("torsional_hz"))["snr_where"]
                     rec["sensors"][lc] = v
                     per.append(v)
                 runs.append(rec)

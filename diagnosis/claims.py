@@ -253,7 +253,7 @@ def _order_left(j, a_nom, a_ref, z):
             "significant": bool(est.gamma_log10_sf(float(np.sum(z)), len(z)) < ORDER_LOG10_P)}
 
 
-def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7):
+def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7, ripple_fit=None):
     """Broadband humps of the refined residual: contiguous regions where the
     Welch PSD (0.25 Hz resolution, running median over 2 Hz so that lines
     drop out) stays above ``ratio`` x the noise floor for
@@ -261,7 +261,10 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7):
     energy, and not a line (the 3 strongest bins hold less than ``max_top3`` of
     the region's excess: a harmonic's energy sits in its window's main lobe).
     A lightly damped mode excited broadband looks like this and follows no
-    element's speed. Returns findings, strongest first."""
+    element's speed. ``ripple_fit`` (:func:`diagnosis.ripple.screen`): a hump
+    whose excess the drives' fitted torque ripple reproduces (share >=
+    ``ripple.EXPLAINED``) is the line's own mode excited by it, reported so and
+    not as unexplained. Returns findings, strongest first."""
     last = d.steps[-1]["sims"]
     found = []
     for c in d.ctx:
@@ -297,11 +300,28 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7):
                 lo_i, hi_i = max(a, i0 - w), min(b, i0 + w + 1)
                 pm = np.convolve(p, np.ones(3) / 3.0, mode="same")
                 fc = float(f[lo_i + int(np.argmax(pm[lo_i:hi_i]))])
-                found.append({"kind": "unexplained resonance", "run": c.name, "sensor": s,
-                              "frequency_hz": fc, "band_hz": [float(f[a]), float(f[b - 1])],
-                              "share_of_residual": share, "rms_N": math.sqrt(e),
-                              "text": f"unexplained resonance near {fc:.3g} Hz on {s.split('.')[0]} "
-                                      f"({100 * share:.0f} % of the refined residual, run {c.name})"})
+                h = {"kind": "unexplained resonance", "run": c.name, "sensor": s,
+                     "frequency_hz": fc, "band_hz": [float(f[a]), float(f[b - 1])],
+                     "share_of_residual": share, "rms_N": math.sqrt(e),
+                     "text": f"unexplained resonance near {fc:.3g} Hz on {s.split('.')[0]} "
+                             f"({100 * share:.0f} % of the refined residual, run {c.name})"}
+                rf = (ripple_fit or {}).get(c.name)
+                if rf is not None and s in rf["psd"] and len(rf["f"]) == len(f):
+                    from webline.diagnosis import ripple
+                    x = ripple.explained(f, ps, S0, rf["psd"][s], (f[a], f[b - 1]))
+                    h["ripple_explains"] = x
+                    if x is not None and x >= ripple.EXPLAINED:
+                        lv = rf["levels_Nm_per_rtHz"]
+                        on = ", ".join(f"{1e3 * v:.2g} on {el}" for el, v in sorted(lv.items(), key=lambda x: -x[1])
+                                       if v > 0)
+                        h["kind"] = "line mode excited by drive torque ripple"
+                        h["text"] = (f"the line's own mode near {fc:.3g} Hz on {s.split('.')[0]}, excited by the "
+                                     f"drives' torque ripple: the refined model with a ripple of {on} "
+                                     f"mN*m/sqrt(Hz) reproduces {100 * x:.0f} % of it "
+                                     f"({100 * share:.0f} % of the refined residual, run {c.name})")
+                    else:
+                        h["text"] += (f"; the drives' torque ripple explains {100 * (x or 0.0):.0f} % of it")
+                found.append(h)
     # across runs: does it stay at one frequency whatever the speed?
     runs = {c.name for c in d.ctx}
     for h in found:

@@ -42,6 +42,9 @@ def parser():
                     help="model runs: the compiled monolithic ODE (fast, default) or the FMU co-simulation")
     ap.add_argument("--no-confirm", action="store_true",
                     help="skip the final check of the refined layout by the FMU co-simulation (fast engine)")
+    ap.add_argument("--no-ripple", action="store_true",
+                    help="do not fit the drives' torque ripple to the residual's humps (each hump stays "
+                         "an unexplained resonance)")
     ap.add_argument("--no-transfer", action="store_true",
                     help="keep every estimated order in the refined layout, also those whose held-out "
                          "prediction does not carry over lines within the data sheet's tolerances")
@@ -68,7 +71,8 @@ def main(argv=None):
                   progress=not args.quiet and sys.stderr.isatty(),
                   jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1),
                   time_column=args.time, time_unit=args.time_unit, engine=args.engine,
-                  confirm=not args.no_confirm, gains=args.gains, transfer=not args.no_transfer)
+                  confirm=not args.no_confirm, gains=args.gains, transfer=not args.no_transfer,
+                  ripple=not args.no_ripple)
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:

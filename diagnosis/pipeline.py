@@ -74,6 +74,7 @@ class Options:
     confirm: bool = True             # fast engine: run the refined layout once through the co-simulation
     transfer: bool = True            # held-out runs: leave out orders whose prediction there does not
     #                                  carry over lines within the data sheet's tolerances (diagnosis.transfer)
+    ripple: bool = True              # fit the drives' torque ripple to the residual's humps (diagnosis.ripple)
     estimator: str = "time"          # Fourier coefficients: "time" (data regressed on simulated
     #                                  responses, diagnosis.regress; ramps and speed-dependent gains
     #                                  included) or "harmonic" (measured harmonic / complex gain)

@@ -34,7 +34,7 @@ def build(d):
         "timings_s": d.timings,
         "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall},
     }
-    from webline.diagnosis import claims
+    from webline.diagnosis import claims, ripple
     fit = [c for c in d.ctx if c.fit]
     hold = [c for c in d.ctx if not c.fit]
     first, last = d.steps[0], d.steps[-1]
@@ -75,7 +75,9 @@ def build(d):
     rep["across_runs"] = _across_runs(d, rep)
     rep["noise_floor"] = {r: {s: {k: v for k, v in x.items()} for s, x in per.items()} for r, per in d.noise.items()}
     rep["left"] = claims.leftovers(d, d.noise, rep["remaining_peaks"])
-    rep["findings"] = claims.humps(d, d.noise)
+    rf = ripple.screen(d, d.noise) if d.opt.ripple else {}
+    rep["ripple"] = {r: {"levels_Nm_per_rtHz": v["levels_Nm_per_rtHz"]} for r, v in rf.items()} or None
+    rep["findings"] = claims.humps(d, d.noise, ripple_fit=rf)
     rep["rejected"] = _rejected(d)
     rep["structure"] = getattr(d, "structure", None)
     rep["transfer"] = getattr(d, "transfer", None)

@@ -51,6 +51,23 @@ def test_compliance_visibility_counts_only_its_band():
     assert c["snr_where"] == pytest.approx(6.0) and c["detectable"]
 
 
+def test_stochastic_deflection_of_a_random_difference_is_its_power_ratio_per_bin():
+    # a random difference with a^2 the noise's power per bin: P_k/S_k ~ a^2 in every bin, so
+    # sqrt(sum (P/S)^2) = a^2 sqrt(bins); both periodograms are smoothed over 0.5 Hz (31 bins
+    # here), a relative error of about 1/sqrt(31) each: 25 % on the squared ratio covers it
+    a, s = 0.7, 0.3
+    noise = _noise(len(t), FS, s, seed=3)
+    delta = _noise(len(t), FS, a * s, seed=4)
+    band = (2.0, 8.0)
+    bins = int(np.sum((np.fft.rfftfreq(len(t), 1 / FS) >= band[0]) & (np.fft.rfftfreq(len(t), 1 / FS) <= band[1])))
+    d = BI.stochastic_deflection(delta, noise, FS, band)
+    assert d == pytest.approx(a * a * math.sqrt(bins), rel=0.25)
+    # it needs the difference's spectrum only: a random sequence of the same spectrum scores alike
+    d2 = BI.stochastic_deflection(_noise(len(t), FS, a * s, seed=5), noise, FS, band)
+    assert d2 == pytest.approx(d, rel=0.15)
+    assert BI.stochastic_deflection(np.zeros(len(t)), noise, FS, band) == 0.0
+
+
 def test_backlash_visibility_needs_a_torque_reversal():
     noise = _noise(len(t), FS, 0.3, seed=2)
     y0 = np.full(len(t), 100.0)
@@ -90,9 +107,12 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     fit = [r for r in truth["runs"] if not r["holdout"]]
     assert [r["run"] for r in det["runs"]] == [r["name"] for r in fit]
     for rr, r in zip(det["runs"], fit):
+        assert r["ripple_set"]  # every truth drive has its torque ripple
         for lc, v in rr["sensors"].items():
             assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=1e-9)
             assert v["delta_rms_N"] > 0 and math.isfinite(v["snr_where"])
+            assert v["deflection_where"] >= 0 and math.isfinite(v["snr_where_without_ripple"])
+    assert "deflection_where" in det and "snr_where_without_ripple" in det
     el = truth["effects"][i]["element"]
     wo = BI._layout_without(truth, doc, folder / "blind" / "line.yaml", i)["set"]
     pset, _ = BI.param_set(BI.TruthModel(**truth["model"]), doc)

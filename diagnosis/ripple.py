@@ -1,0 +1,140 @@
+"""Drive torque ripple: is a broadband hump of the residual the line's own mode?
+
+Every drive's torque carries a ripple (current ripple, PWM, commutation) that
+no layout states. It excites the line's lightly damped modes, and the residual
+of a model without it shows their humps at fixed frequencies, which
+:func:`diagnosis.claims.humps` would otherwise call unexplained resonances.
+
+:func:`responses` simulates the refined model once per fit run and drive with
+a white ripple of known density on that drive alone (the speed loop's
+``torque_noise``) and takes the Welch PSD of its difference from the refined
+model at each sensor: the line's ripple transfer, per unit density.
+:func:`fit_levels` finds the ripple density of each drive that best explains
+the residual's spectrum above its noise floor (non-negative least squares,
+each bin weighted by its own level so that no band dominates), and
+:func:`explained` says which share of a hump's excess energy that fit
+reproduces. A hump the ripple explains is the line's own mode, reported as
+such with the estimated densities; what it does not explain stays an
+unexplained resonance.
+
+Densities are one-sided, N.m/sqrt(Hz): a white ripple of rms sigma held over
+steps dt has 2 sigma^2 dt, whatever the sample rate.
+"""
+import logging
+import math
+
+import numpy as np
+from scipy import optimize, signal
+
+from webline.diagnosis import estimate as est
+from webline.diagnosis import layout_edit
+
+log = logging.getLogger("webline.diagnose")
+
+PROBE_DENSITY = 2.0e-3    # N.m/sqrt(Hz) simulated on each drive (the response is linear in it)
+SEED = 4242
+BAND_HZ = (0.2, 30.0)     # where the line's modes sit (the fit's bins)
+EXPLAINED = 0.5           # a hump whose excess the ripple fit reproduces to this share is the line's own
+
+
+def drives(sim):
+    """Driven elements (with a speed loop) of a simulation's system."""
+    return [el for el, m in sim.system.meta["elements"].items() if m.get("driven") and m.get("speed_pi")]
+
+
+def _hold_step(system):
+    """The step over which a simulation holds a source: its output interval."""
+    from webline.orchestrator.reference import output_times
+    return float(np.median(np.diff(np.asarray(output_times(system.experiment), float))))
+
+
+def smooth(p, f):
+    """Running median over 2 Hz, as :func:`diagnosis.claims.humps` looks at a residual."""
+    return est._running_median(p, max(5, 2 * int(round(1.0 / (f[1] - f[0]))) + 1))
+
+
+def welch(x, fs):
+    """The residual PSD as :func:`diagnosis.claims.humps` takes it (4 s segments, half overlap)."""
+    x = np.asarray(x, float) - np.mean(x)
+    n = len(x)
+    nperseg = int(min(n, 4.0 * fs))
+    return signal.welch(x, fs=fs, nperseg=nperseg, noverlap=nperseg // 2)
+
+
+def probe_doc(doc, element, dt):
+    """``doc`` with a white ripple of PROBE_DENSITY on ``element``'s drive, held over ``dt``."""
+    rms = PROBE_DENSITY / math.sqrt(2.0 * dt)
+    doc = layout_edit.with_set(doc, f"drives.speed_loops.{element}.torque_noise", f"{rms:.6g} N*m")
+    return layout_edit.with_set(doc, f"drives.speed_loops.{element}.noise_seed", SEED)
+
+
+def responses(d, doc, sims):
+    """{run: {drive: {sensor: PSD per unit density^2}}} of the refined model (``doc``,
+    its simulations ``sims`` by run) on the fit runs, and the frequency grid."""
+    fit = [c for c in d.ctx if c.fit]
+    jobs, keys = [], []
+    for c in fit:
+        dt = _hold_step(sims[c.name].system)
+        for el in drives(sims[c.name]):
+            jobs.append((c.run, probe_doc(doc, el, dt), f"ripple probe {el}"))
+            keys.append((c, el))
+    out, freqs = {}, None
+    for (c, el), sim in zip(keys, d.model.simulate_many(jobs)):
+        if isinstance(sim, Exception):
+            log.info("  ripple probe of %s in %s failed: %s", el, c.name, (str(sim).splitlines() or [""])[0])
+            continue
+        per = out.setdefault(c.name, {}).setdefault(el, {})
+        for s in c.sensors:
+            f, p = welch((sim.columns[s] - sims[c.name].columns[s])[c.mask], c.fs)
+            per[s] = smooth(p, f) / PROBE_DENSITY ** 2
+            freqs = f
+    return out, freqs
+
+
+def fit_levels(P, G, S0, f, band=BAND_HZ):
+    """Ripple density^2 per drive (>= 0) so that sum_e a_e G[e][s] fits P[s] - S0[s]
+    over ``band``, each bin weighted by 1/P (relative error). ``P``, ``S0`` by sensor,
+    ``G`` {drive: {sensor: PSD per unit density^2}}. Returns ({drive: a_e}, explained
+    PSD {sensor: sum_e a_e G})."""
+    names = [e for e in G if all(s in G[e] for s in P)]
+    if not names:
+        return {}, {s: np.zeros_like(P[s]) for s in P}
+    m = (f >= band[0]) & (f <= band[1])
+    A, b = [], []
+    for s in P:
+        w = 1.0 / np.maximum(P[s][m], 1e-300)
+        A.append(np.column_stack([G[e][s][m] * w for e in names]))
+        b.append((P[s][m] - S0[s]) * w)
+    a, _ = optimize.nnls(np.vstack(A), np.concatenate(b))
+    levels = dict(zip(names, (float(x) for x in a)))
+    return levels, {s: sum(levels[e] * G[e][s] for e in names) for s in P}
+
+
+def explained(f, p, S0, R, band):
+    """Share of a hump's excess (running-median PSD ``p`` above ``S0`` over ``band``)
+    that the ripple fit's PSD ``R`` reproduces (at most 1)."""
+    m = (f >= band[0]) & (f <= band[1])
+    excess = float(np.sum(np.maximum(p[m] - S0, 0.0)))
+    if not excess > 0:
+        return None
+    return min(1.0, float(np.sum(np.minimum(R[m], np.maximum(p[m] - S0, 0.0)))) / excess)
+
+
+def screen(d, noise, doc=None, sims=None):
+    """The ripple fit of every fit run: {run: {"levels_Nm_per_rtHz": {drive: density},
+    "psd": {sensor: explained PSD}, "f": grid}}; {} when no drive could be probed."""
+    doc = d.refined_doc if doc is None else doc
+    sims = d.steps[-1]["sims"] if sims is None else sims
+    G, f = responses(d, doc, sims)
+    out = {}
+    for c in d.ctx:
+        if c.name not in G:
+            continue
+        P, S0 = {}, {}
+        for s in c.sensors:
+            _, p = welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs)
+            P[s] = smooth(p, f)
+            S0[s] = noise[c.name][s]["psd_N2_per_hz"]
+        a, R = fit_levels(P, G[c.name], S0, f)
+        out[c.name] = {"levels_Nm_per_rtHz": {e: math.sqrt(v) for e, v in a.items()}, "psd": R, "f": f}
+    return out
