@@ -315,9 +315,12 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7, r
                         on = ", ".join(f"{1e3 * v:.2g} on {el}" for el, v in sorted(lv.items(), key=lambda x: -x[1])
                                        if v > 0)
                         h["kind"] = "line mode excited by drive torque ripple"
+                        # the drives' responses overlap in shape: the split between them is a fit,
+                        # not a measurement of each drive (docs/diagnose.md)
                         h["text"] = (f"the line's own mode near {fc:.3g} Hz on {s.split('.')[0]}, excited by the "
-                                     f"drives' torque ripple: the refined model with a ripple of {on} "
-                                     f"mN*m/sqrt(Hz) reproduces {100 * x:.0f} % of it "
+                                     f"drives' torque ripple: the refined model with a ripple fitted to the "
+                                     f"residual ({on} mN*m/sqrt(Hz), a split between the drives that these data "
+                                     f"do not fix) reproduces {100 * x:.0f} % of it "
                                      f"({100 * share:.0f} % of the refined residual, run {c.name})")
                     else:
                         h["text"] += (f"; the drives' torque ripple explains {100 * (x or 0.0):.0f} % of it")

@@ -70,15 +70,15 @@ def probe_doc(doc, element, dt):
 
 def responses(d, doc, sims):
     """{run: {drive: {sensor: PSD per unit density^2}}} of the refined model (``doc``,
-    its simulations ``sims`` by run) on the fit runs, and the frequency grid."""
-    fit = [c for c in d.ctx if c.fit]
+    its simulations ``sims`` by run) on every run, and {run: frequency grid} (runs
+    may differ in sample rate)."""
     jobs, keys = [], []
-    for c in fit:
+    for c in d.ctx:  # held-out runs too: the fit reads the residual's spectrum, no effect's estimate
         dt = _hold_step(sims[c.name].system)
         for el in drives(sims[c.name]):
             jobs.append((c.run, probe_doc(doc, el, dt), f"ripple probe {el}"))
             keys.append((c, el))
-    out, freqs = {}, None
+    out, freqs = {}, {}
     for (c, el), sim in zip(keys, d.model.simulate_many(jobs)):
         if isinstance(sim, Exception):
             log.info("  ripple probe of %s in %s failed: %s", el, c.name, (str(sim).splitlines() or [""])[0])
@@ -87,7 +87,7 @@ def responses(d, doc, sims):
         for s in c.sensors:
             f, p = welch((sim.columns[s] - sims[c.name].columns[s])[c.mask], c.fs)
             per[s] = smooth(p, f) / PROBE_DENSITY ** 2
-            freqs = f
+            freqs[c.name] = f
     return out, freqs
 
 
@@ -121,15 +121,16 @@ def explained(f, p, S0, R, band):
 
 
 def screen(d, noise, doc=None, sims=None):
-    """The ripple fit of every fit run: {run: {"levels_Nm_per_rtHz": {drive: density},
+    """The ripple fit of every run: {run: {"levels_Nm_per_rtHz": {drive: density},
     "psd": {sensor: explained PSD}, "f": grid}}; {} when no drive could be probed."""
     doc = d.refined_doc if doc is None else doc
     sims = d.steps[-1]["sims"] if sims is None else sims
-    G, f = responses(d, doc, sims)
+    G, freqs = responses(d, doc, sims)
     out = {}
     for c in d.ctx:
         if c.name not in G:
             continue
+        f = freqs[c.name]
         P, S0 = {}, {}
         for s in c.sensors:
             _, p = welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs)

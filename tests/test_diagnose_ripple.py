@@ -57,7 +57,7 @@ def test_a_hump_the_ripple_explains_is_the_lines_own_mode():
                   "levels_Nm_per_rtHz": {"unwind": 2e-3, "rewind": 0.0}}}
     h = claims.humps(d, noise, ripple_fit=full)[0]
     assert h["kind"] == "line mode excited by drive torque ripple" and h["ripple_explains"] > 0.9
-    assert "2 on unwind mN*m/sqrt(Hz)" in h["text"] and "rewind" not in h["text"]
+    assert "(2 on unwind mN*m/sqrt(Hz)," in h["text"] and "rewind" not in h["text"]
     none = {"r": dict(full["r"], psd={"lc15.T": np.zeros_like(ps)})}
     h = claims.humps(d, noise, ripple_fit=none)[0]
     assert h["kind"] == "unexplained resonance" and h["ripple_explains"] == 0.0
@@ -66,30 +66,35 @@ def test_a_hump_the_ripple_explains_is_the_lines_own_mode():
 
 def test_ripple_density_of_a_simulated_line_is_recovered(tmp_path):
     """The EWL with a white ripple of 4 mN*m/sqrt(Hz) on the unwind drive alone, load
-    cells with 0.05 N of white noise, 40 s at 250 Hz. The fit over 0.2-30 Hz and three
+    cells with 0.05 N of white noise, two runs at other rates (40 s at 250 Hz, 20 s at
+    500 Hz: the density, not the rms, is the same). The fit over 0.2-30 Hz and three
     sensors has thousands of Welch bins of ~20 degrees of freedom each: its statistical
     error is a few per cent. The unwind's response differs in shape from the other
     drives' (it carries its own zone's mode), so the density goes to the unwind:
     within 25 %, and the other drives get less than a third of it."""
-    fs, T, dens = 250.0, 40.0, 4e-3
+    dens = 4e-3
     model = LineModel(EWL)
-    exp = {"experiment.duration": f"{T} s", "experiment.output_interval": f"{1 / fs} s"}
-    run = SimpleNamespace(name="r", overrides=exp, t=np.arange(0.0, T + 0.5 / fs, 1 / fs), holdout=False)
     base_doc = {"base": str(EWL), "set": {}}
-    truth = ripple.probe_doc(base_doc, "unwind", 1.0 / fs)
-    truth["set"]["drives.speed_loops.unwind.torque_noise"] = \
-        f"{dens / math.sqrt(2.0 / fs):.6g} N*m"
-    truth["set"]["drives.speed_loops.unwind.noise_seed"] = 77
-    sim_true, sim_model = model.simulate_many([(run, truth, "truth"), (run, base_doc, "model")])
     rng = np.random.default_rng(5)
-    c = RunCtx(run, True)
-    c.fs = fs
-    c.sensors = [s for s in ("lc9.T", "lc15.T", "lc19.T") if s in sim_true.columns]
-    c.meas = {s: sim_true.columns[s] + rng.normal(0, 0.05, len(run.t)) for s in c.sensors}
-    c.mask = run.t >= 2.0
-    d = SimpleNamespace(ctx=[c], model=model, refined_doc=base_doc, steps=[{"sims": {"r": sim_model}}])
-    S0 = 0.05 ** 2 * 2.0 / fs
-    noise = {"r": {s: {"psd_N2_per_hz": S0} for s in c.sensors}}
-    fit = ripple.screen(d, noise)["r"]["levels_Nm_per_rtHz"]
-    assert fit["unwind"] == pytest.approx(dens, rel=0.25)
-    assert all(v < dens / 3 for el, v in fit.items() if el != "unwind")
+    ctx, sims, noise = [], {}, {}
+    for name, fs, T, seed in (("a", 250.0, 40.0, 77), ("b", 500.0, 20.0, 78)):
+        exp = {"experiment.duration": f"{T} s", "experiment.output_interval": f"{1 / fs} s"}
+        run = SimpleNamespace(name=name, overrides=exp, t=np.arange(0.0, T + 0.5 / fs, 1 / fs), holdout=False)
+        truth = ripple.probe_doc(base_doc, "unwind", 1.0 / fs)
+        truth["set"]["drives.speed_loops.unwind.torque_noise"] = f"{dens / math.sqrt(2.0 / fs):.6g} N*m"
+        truth["set"]["drives.speed_loops.unwind.noise_seed"] = seed
+        sim_true, sims[name] = model.simulate_many([(run, truth, "truth"), (run, base_doc, "model")])
+        c = RunCtx(run, True)
+        c.fs = fs
+        c.sensors = [s for s in ("lc9.T", "lc15.T", "lc19.T") if s in sim_true.columns]
+        c.meas = {s: sim_true.columns[s] + rng.normal(0, 0.05, len(run.t)) for s in c.sensors}
+        c.mask = run.t >= 2.0
+        ctx.append(c)
+        noise[name] = {s: {"psd_N2_per_hz": 0.05 ** 2 * 2.0 / fs} for s in c.sensors}
+    d = SimpleNamespace(ctx=ctx, model=model, refined_doc=base_doc, steps=[{"sims": sims}])
+    fits = ripple.screen(d, noise)
+    for name in ("a", "b"):
+        fit = fits[name]["levels_Nm_per_rtHz"]
+        assert fit["unwind"] == pytest.approx(dens, rel=0.25), (name, fit)
+        assert all(v < dens / 3 for el, v in fit.items() if el != "unwind"), (name, fit)
+        assert len(fits[name]["f"]) == len(fits[name]["psd"]["lc9.T"])
