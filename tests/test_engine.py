@@ -224,3 +224,16 @@ def test_negative_torque_ripple_is_refused():
     with pytest.raises(Exception, match="torque_noise"):
         load_system(ROOT / "scenarios" / "ewl_out_of_round.yaml",
                     {"drives.speed_loops.sw_leader.torque_noise": "-1 N*m"})
+
+
+def test_torque_ripple_in_user_units_reaches_the_speed_loop_in_si_with_its_seed():
+    s = load_system(ROOT / "scenarios" / "ewl_out_of_round.yaml",
+                    {"drives.speed_loops.sw_leader.torque_noise": "0.1 lbf*ft",
+                     "drives.speed_loops.sw_leader.noise_seed": 9,
+                     "drives.speed_loops.unwind.torque_noise": "0.02 N*m"})
+    p = {c.name: c.parameters for c in s.components}
+    assert p["sw_leader_speed_pi"]["torque_noise"] == pytest.approx(0.1 * 4.4482216152605 * 0.3048, rel=1e-9)
+    assert p["sw_leader_speed_pi"]["seed"] == 9.0
+    # without a seed, one from the loop's position, apart from the load cells' 1, 2, ...
+    assert p["unwind_speed_pi"]["seed"] >= 1000.0 and p["unwind_speed_pi"]["seed"] != 9.0
+    assert "torque_noise" not in p["rewind_speed_pi"]  # no ripple: the parameter is not written
