@@ -199,7 +199,9 @@ class LineModel:
             try:
                 system = self.system(run, doc)
                 compiled = engine.compile_system(system)
-                key = (compiled.structure, tuple(output_times(system.experiment)), float(system.experiment.start))
+                # a batch shares its held noise sources (load cells, drive ripple): they are in the key
+                key = (compiled.structure, tuple(output_times(system.experiment)), float(system.experiment.start),
+                       tuple(compiled.noise))
             except (SimulationFailed, ValueError) as exc:
                 out[k] = exc
                 systems.append(None)

@@ -175,7 +175,7 @@ class _Builder:
             self.gens.append(cls(self, ci, comp, model, ref.offsets[ci][0]))
         # held Gaussian sources (load-cell noise, drive torque ripple): (slot, seed, std)
         self.noise = [(g.noise_slot, int(g.m.seed), float(g.noise_std)) for g in self.gens
-                      if getattr(g, "noise_slot", None) is not None]
+                      if getattr(g, "noise_slot", None) is not None and g.noise_std != 0.0]
 
     def param(self, ci, name, value):
         key = (ci, name)
@@ -358,8 +358,10 @@ class _SpeedPI(_Gen):
         self.lag = bool(getattr(m, "lag", False))
         if self.lag:
             self.tau_current = self.P("tau_current", m.tau_current)
+        # the slot is there with or without ripple: a line with ripple on a drive has the same
+        # structure as without (one compiled code; the diagnosis probes each drive in turn)
         self.noise_std = getattr(m, "torque_noise", 0.0)
-        self.noise_slot = self.b.param(self.ci, "noise", 0.0) if self.noise_std != 0.0 else None
+        self.noise_slot = self.b.param(self.ci, "noise", 0.0)
 
     def omega_ref(self, body):
         return self.tmp(body, "omega_ref", lambda: f"({self.u(body, 'v_ref')} + {self.u(body, 'v_trim')}) / "
@@ -386,7 +388,7 @@ class _SpeedPI(_Gen):
             return self.omega_ref(body)
         if name == "tau":
             tau = self.x(1) if self.lag else f"{self.law(body)[1]}[0]"
-            return f"{tau} + p[{self.noise_slot}]" if self.noise_slot is not None else tau
+            return f"{tau} + p[{self.noise_slot}]"
         return super().output(body, name)
 
     def derivatives(self, body):
