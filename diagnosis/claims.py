@@ -19,6 +19,7 @@ import numpy as np
 from scipy import signal, stats
 
 from webline.diagnosis import estimate as est
+from webline.diagnosis import ripple
 
 ORDER_LOG10_P = -5.0   # one order's harmonic left is more than noise below this log10 p
 
@@ -270,18 +271,15 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7, r
     for c in d.ctx:
         for s in c.sensors:
             r = (c.meas[s] - last[c.name].columns[s])[c.mask]
-            r = r - np.mean(r)
-            n = len(r)
-            nperseg = int(min(n, 4.0 * c.fs))
-            if nperseg < 64:
+            if min(len(r), 4.0 * c.fs) < 64:
                 continue
-            f, p = signal.welch(r, fs=c.fs, nperseg=nperseg, noverlap=nperseg // 2)
+            f, p = ripple.welch(r, c.fs)
             df = f[1] - f[0]
             S0 = noise[c.name][s]["psd_N2_per_hz"]
             total = float(np.sum(p) * df)
             # a running median over 2 Hz removes lines (a window's main lobe is 4 bins)
             # and keeps what is broader than about 1 Hz
-            ps = est._running_median(p, max(5, 2 * int(round(1.0 / df)) + 1))
+            ps = ripple.smooth(p, f)
             above = (ps > ratio * S0) & (f >= max(c.fc, 2 * df))
             for a, b in _runs(above):
                 width = (b - a) * df
@@ -306,8 +304,7 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7, r
                      "text": f"unexplained resonance near {fc:.3g} Hz on {s.split('.')[0]} "
                              f"({100 * share:.0f} % of the refined residual, run {c.name})"}
                 rf = (ripple_fit or {}).get(c.name)
-                if rf is not None and s in rf["psd"] and len(rf["f"]) == len(f):
-                    from webline.diagnosis import ripple
+                if rf is not None and s in rf["psd"]:  # the same Welch grid (ripple.welch, same run)
                     x = ripple.explained(f, ps, S0, rf["psd"][s], (f[a], f[b - 1]))
                     h["ripple_explains"] = x
                     if x is not None and x >= ripple.EXPLAINED:

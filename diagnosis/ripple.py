@@ -49,12 +49,14 @@ def _hold_step(system):
 
 
 def smooth(p, f):
-    """Running median over 2 Hz, as :func:`diagnosis.claims.humps` looks at a residual."""
+    """Running median over 2 Hz (at least 5 bins): lines drop out, humps broader than
+    about 1 Hz stay. The view :func:`diagnosis.claims.humps` takes of a residual."""
     return est._running_median(p, max(5, 2 * int(round(1.0 / (f[1] - f[0]))) + 1))
 
 
 def welch(x, fs):
-    """The residual PSD as :func:`diagnosis.claims.humps` takes it (4 s segments, half overlap)."""
+    """Welch PSD of a residual, mean removed: 4 s segments (0.25 Hz), half overlap. The
+    grid :func:`diagnosis.claims.humps` and the ripple fit share."""
     x = np.asarray(x, float) - np.mean(x)
     n = len(x)
     nperseg = int(min(n, 4.0 * fs))
