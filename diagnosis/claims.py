@@ -311,13 +311,14 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7, r
                         lv = rf["levels_Nm_per_rtHz"]
                         on = ", ".join(f"{1e3 * v:.2g} on {el}" for el, v in sorted(lv.items(), key=lambda x: -x[1])
                                        if v > 0)
-                        h["kind"] = "line mode excited by drive torque ripple"
+                        h["kind"] = "line mode excited through the drives"
                         # the drives' responses overlap in shape: the split between them is a fit,
-                        # not a measurement of each drive (docs/diagnose.md)
-                        h["text"] = (f"the line's own mode near {fc:.3g} Hz on {s.split('.')[0]}, excited by the "
-                                     f"drives' torque ripple: the refined model with a ripple fitted to the "
-                                     f"residual ({on} mN*m/sqrt(Hz), a split between the drives that these data "
-                                     f"do not fix) reproduces {100 * x:.0f} % of it "
+                        # not a measurement of each drive; and what excites the mode may be any
+                        # broadband torque (ripple, a drive effect modelled imperfectly)
+                        h["text"] = (f"the line's own mode near {fc:.3g} Hz on {s.split('.')[0]}, excited through "
+                                     f"the drives' torque: a broadband torque ripple fitted to the residual "
+                                     f"({on} mN*m/sqrt(Hz); these data do not fix the split between the drives) "
+                                     f"reproduces {100 * x:.0f} % of it "
                                      f"({100 * share:.0f} % of the refined residual, run {c.name})")
                     else:
                         h["text"] += (f"; the drives' torque ripple explains {100 * (x or 0.0):.0f} % of it")

@@ -56,8 +56,8 @@ def test_a_hump_the_ripple_explains_is_the_lines_own_mode():
     full = {"r": {"psd": {"lc15.T": np.maximum(ps - S0, 0.0)}, "f": f,
                   "levels_Nm_per_rtHz": {"unwind": 2e-3, "rewind": 0.0}}}
     h = claims.humps(d, noise, ripple_fit=full)[0]
-    assert h["kind"] == "line mode excited by drive torque ripple" and h["ripple_explains"] > 0.9
-    assert "(2 on unwind mN*m/sqrt(Hz)," in h["text"] and "rewind" not in h["text"]
+    assert h["kind"] == "line mode excited through the drives" and h["ripple_explains"] > 0.9
+    assert "(2 on unwind mN*m/sqrt(Hz);" in h["text"] and "rewind" not in h["text"]
     none = {"r": dict(full["r"], psd={"lc15.T": np.zeros_like(ps)})}
     h = claims.humps(d, noise, ripple_fit=none)[0]
     assert h["kind"] == "unexplained resonance" and h["ripple_explains"] == 0.0
