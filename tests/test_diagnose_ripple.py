@@ -98,3 +98,17 @@ def test_ripple_density_of_a_simulated_line_is_recovered(tmp_path):
         assert fit["unwind"] == pytest.approx(dens, rel=0.25), (name, fit)
         assert all(v < dens / 3 for el, v in fit.items() if el != "unwind"), (name, fit)
         assert len(fits[name]["f"]) == len(fits[name]["psd"]["lc9.T"])
+
+
+def test_a_layout_that_states_a_ripple_is_not_fitted_again():
+    fs, T = 250.0, 4.0
+    model = LineModel(EWL)
+    exp = {"experiment.duration": f"{T} s", "experiment.output_interval": f"{1 / fs} s"}
+    run = SimpleNamespace(name="a", overrides=exp, t=np.arange(0.0, T + 0.5 / fs, 1 / fs), holdout=False)
+    doc = ripple.probe_doc({"base": str(EWL), "set": {}}, "rewind", 1.0 / fs)
+    sim = model.simulate(run, doc=doc)
+    c = RunCtx(run, True)
+    c.fs, c.sensors, c.mask = fs, ["lc9.T"], run.t >= 1.0
+    c.meas = {"lc9.T": sim.columns["lc9.T"]}
+    d = SimpleNamespace(ctx=[c], model=model, refined_doc=doc, steps=[{"sims": {"a": sim}}])
+    assert ripple.screen(d, {"a": {"lc9.T": {"psd_N2_per_hz": 1e-6}}}) == {}
