@@ -173,8 +173,7 @@ def ripple_set(ripple, facts, T_max, fs_hz, seed):
     return out
 
 
-def _q(value, dim):
-    return tolerances._q(value, dim)
+_q = tolerances._q
 
 
 def param_set(model, line_doc):

@@ -127,8 +127,8 @@ def screen(d, noise, doc=None, sims=None):
     "psd": {sensor: explained PSD}, "f": grid}}; {} when no drive could be probed."""
     doc = d.refined_doc if doc is None else doc
     sims = d.steps[-1]["sims"] if sims is None else sims
-    stated = sorted({c.name for sim in sims.values() for c in sim.system.components
-                     if float(c.parameters.get("torque_noise", 0.0) or 0.0) > 0.0})
+    from webline.orchestrator.reference import ripple_components
+    stated = sorted({name for sim in sims.values() for name in ripple_components(sim.system)})
     if stated:
         # the layout models a ripple already: its residual is not the model's response plus
         # a ripple to fit, and a probe would replace the stated one on its drive

@@ -249,6 +249,11 @@ def output_times(experiment, step=None):
     return experiment.start + h * every * np.arange(n_steps // every + 1)
 
 
+def ripple_components(system):
+    """Names of the components that carry a drive torque ripple (``torque_noise`` != 0)."""
+    return [c.name for c in system.components if float(c.parameters.get("torque_noise", 0.0) or 0.0) != 0.0]
+
+
 def solve_reference(system, rtol=1e-8, atol=None, method="LSODA", max_step=np.inf):
     """Solve the monolithic ODE of ``system`` over its experiment; returns a
     :class:`ReferenceSolution` (dense: sample it at any times with ``.sample(t)``).
@@ -258,7 +263,7 @@ def solve_reference(system, rtol=1e-8, atol=None, method="LSODA", max_step=np.in
     The integration restarts at every Profile knot (a kink in an input).
     """
     wall = _time.perf_counter()
-    ripple = [c.name for c in system.components if float(c.parameters.get("torque_noise", 0.0) or 0.0) != 0.0]
+    ripple = ripple_components(system)
     if ripple:
         # the ripple is held between communication points; a continuous-time solver would
         # draw a new sample at every evaluation (a rhs discontinuous every microsecond)
