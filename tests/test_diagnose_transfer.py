@@ -180,3 +180,52 @@ def test_a_sensor_where_the_order_barely_matters_does_not_decide():
     fit = _ctx("fit", SENS, std={"lc9.T": 1.0, "lc19.T": 0.01})
     v = _verdict([g] * 9, H, g, fit=fit)
     assert not v["reliable"]
+
+
+def _verdict_two_fit_runs(M_a, M_b, g, h0, fa=4.0, fb=6.0):
+    """Two fit runs putting the order at ``fa`` and ``fb`` Hz, the held-out run at 1.5 Hz."""
+    A, B = _ctx("fit_a", SENS, f=fa), _ctx("fit_b", SENS, f=fb)
+    M = {**_resp(A, M_a), **_resp(B, M_b)}
+    G = [{**_resp(A, g), **_resp(B, g)}] * 3
+    H = [_resp(HOLD, h0)] * 3
+    out = transfer.order_verdicts(None, M, G, H, CAND, [1], [A, B], [HOLD], np.full(3, 1 / 3))
+    assert len(out) == 1
+    return out[0]
+
+
+def test_fit_runs_that_drift_in_phase_with_frequency_extrapolate_to_the_held_out_run():
+    """The runs ask for the line's response turned by -30 deg at 4 Hz and +30 deg at
+    6 Hz (a lag the model lacks): the joint scale is 0 deg, the trend puts the
+    held-out run at 1.5 Hz at -105 deg, where adding the prediction harms."""
+    g = np.array([0.3 + 0.1j, 0.1 - 0.05j])
+    h0 = np.array([0.2 - 0.1j, 0.05 + 0.02j])
+    rot = lambda deg: np.exp(1j * np.radians(deg))
+    v = _verdict_two_fit_runs(g * rot(-30), g * rot(30), g, h0)
+    tr = np.array(v["alpha_trend"][0][0] + 1j * v["alpha_trend"][0][1])
+    a = np.array(v["alpha"][0][0] + 1j * v["alpha"][0][1])
+    assert np.degrees(np.angle(a)) == pytest.approx(0.0, abs=1e-6)
+    assert np.degrees(np.angle(tr / a)) == pytest.approx(-105.0, abs=0.5)
+    assert v["trend_share"] == pytest.approx(1.0)
+    assert not v["reliable"]
+    # runs that agree: no trend, the order helps
+    v = _verdict_two_fit_runs(g * rot(10), g * rot(10), g, h0)
+    assert v["alpha_trend"] == [None, None, None]
+    assert v["reliable"] and v["helps_share"] == pytest.approx(1.0)
+
+
+def test_a_drift_within_the_noise_is_no_trend():
+    """The same +-30 deg, but each run's scale uncertain by about 55 deg: the slope is
+    within 3 standard errors and the joint scale stands."""
+    g = np.array([0.3 + 0.1j, 0.1 - 0.05j])
+    rot = lambda deg: np.exp(1j * np.radians(deg))
+    # whitening weight w = T / (2 S) per sensor; <g, g>_w = w |g|^2 sets var(log alpha_r)
+    w = 40.0 / (2 * 2.0)
+    runs = [(4.0, (g, np.full(2, w)), (g * rot(-30), np.full(2, w))),
+            (6.0, (g, np.full(2, w)), (g * rot(30), np.full(2, w)))]
+    assert transfer.alpha_trend(runs, 1.0) is None
+    # a hundred times the weight: the same drift is now beyond the noise, and linear in f
+    runs = [(f, (gg, 100 * ww), (m, 100 * wm)) for f, (gg, ww), (m, wm) in runs]
+    tr = transfer.alpha_trend(runs, 1.0)
+    assert tr is not None
+    assert np.degrees(np.angle(tr(5.0))) == pytest.approx(0.0, abs=1e-6)
+    assert np.degrees(np.angle(tr(8.0))) == pytest.approx(90.0, abs=1e-6)
