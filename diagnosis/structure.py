@@ -556,7 +556,8 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
     # whose response the layout's form got wrong may have been dropped there (independent
     # c20: an unwind's order 1, 0.32 mm, pruned in the layout's form); the form's own
     # fit prunes again by simulation
-    orders = [sorted({j + 1 for j in np.flatnonzero(np.abs(X0) > 0)} | _strong_orders(fe, cand, len(X0)))
+    orders = [sorted({j + 1 for j in np.flatnonzero(np.abs(X0) > 0)}
+                     | _strong_orders(fe if fe is not None else _rejected_family(d, cand), cand, len(X0)))
               for cand, X0, fe in use]
     use = [(cand, X0) for cand, X0, _ in use]
     starts = []
@@ -568,6 +569,13 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
     Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=1, sims=sims,
                                             label=f"structure {name}", drop_rounds=1)
     return dict(zip([c.element for c in cands], Xs)), sims2
+
+
+def _rejected_family(d, cand):
+    """The family record of an effect the check rejected (its strong orders count as
+    a reported effect's do: independent c20, an unwind rejected in the layout's form
+    with its 0.32 mm order 1 pruned there)."""
+    return next((r.get("_fe") for r in getattr(d, "rejected", []) if r.get("_cand") is cand), None)
 
 
 def _strong_orders(fe, cand, n):

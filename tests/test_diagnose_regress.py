@@ -132,3 +132,21 @@ def test_per_run_estimates_of_one_run_out():
     # one run alone cannot disagree
     assert structure.per_run_estimates(SimpleNamespace(fit_ctx=lambda: runs[:1], orders_for=d.orders_for),
                                        {**b, "G": G[:2], "M": M[:2], "W": W[:2]}) == {}
+
+
+def test_an_effect_the_check_rejected_keeps_its_strong_orders_for_the_form_screen():
+    """A form re-estimates the orders kept as modelled and every order the family screen
+    found strong (z > 25 per fit run). An effect the check rejected comes to the form
+    screen without its report entry; its family record must still give those orders
+    (independent c20: an unwind's 0.32 mm order 1, pruned in the layout's form, came back
+    only as order 3 without it)."""
+    from webline.diagnosis import structure
+    cand = SimpleNamespace(element="unwind")
+    fam = {"eff": {"group": [{"cand": cand, "fits": {"run1": 0, "run2": 0},
+                              "z_order": {1: 152.0, 2: 4.2, 3: 853.0, 6: 9.5}}]}}
+    d = SimpleNamespace(rejected=[{"element": "sw_leader"}, {"_cand": cand, "_X": [0, 0, 1e-5], "_fe": fam}])
+    assert structure._strong_orders(structure._rejected_family(d, cand), cand, 6) == {1, 3}
+    # z of order 1 under 25 per run (2 runs): not strong
+    fam["eff"]["group"][0]["z_order"][1] = 49.0
+    assert structure._strong_orders(structure._rejected_family(d, cand), cand, 6) == {3}
+    assert structure._rejected_family(SimpleNamespace(rejected=[]), cand) is None
