@@ -239,6 +239,34 @@ def _stack(d, cand, fn):
     return np.array(rows), np.array(W)
 
 
+TRADE = 3.0   # NRMSE^2 a form must win on some sensors for each unit it gives up on others
+
+
+def _trade(d, cur_nr, nr, left_energy, sims, why_not):
+    """(accepted, reason) for a form that raises some sensor above the refined model
+    in the layout's form (``why_not``) but explains the line as a whole far better:
+    it wins ``TRADE`` times the NRMSE^2 it gives up, and against the model without
+    the effects (the layout as given) it passes the check of every effect.
+
+    Independent c12 (a 0.69 mm roller9 and a 0.05 mm idler_r1 at the same frequency,
+    truth without feed-forward): in the layout's form the S-wrap blocks roller9's line,
+    lc9 fits to 0.61 and lc19 stays at 0.98; without feed-forward lc9 is 0.72 and
+    lc19 0.49, the run-out 0.64 mm for 0.69 (0.85 mm in the layout's form)."""
+    fit = d.fit_ctx()
+    nominal = {c.name: c.nominal for c in fit}
+    nom_nr, _ = _score(d, nominal)
+    gain = sum(max(0.0, cur_nr[s] ** 2 - nr[s] ** 2) for s in cur_nr if s in nr)
+    loss = sum(max(0.0, nr[s] ** 2 - cur_nr[s] ** 2) for s in cur_nr if s in nr)
+    if not gain >= TRADE * loss:
+        return False, why_not
+    ok, reason = claims.decide(nom_nr, nr, left_energy(nominal), left_energy(sims), None, d.opt.max_worse)
+    if not ok:
+        return False, f"{why_not}; against the layout without the effects it {reason}"
+    worse = ", ".join(f"{s} {cur_nr[s]:.3g} -> {nr[s]:.3g}" for s in cur_nr if s in nr and nr[s] > cur_nr[s])
+    return True, (f"gives up {worse} against the layout's form with the effects, but wins {gain:.3g} of NRMSE^2 "
+                  f"for {loss:.3g} lost (at least {TRADE:g}x); against the layout without the effects it {reason}")
+
+
 def _score(d, sims):
     fit = d.fit_ctx()
     sensors = list(dict.fromkeys(s for c in fit for s in c.sensors))
@@ -441,6 +469,8 @@ def screen(d):
     if best is not results[0]:
         e_best = left_energy(best["sims"])
         ok, reason = claims.decide(cur_nr, best["nrmse"], e_cur, e_best, None, d.opt.max_worse)
+        if not ok:
+            ok, reason = _trade(d, cur_nr, best["nrmse"], left_energy, best["sims"], reason)
         best["check"] = {"accepted": ok, "reason": reason, "local_before": e_cur, "local_after": e_best}
         if ok:
             chosen = best
@@ -566,7 +596,7 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
         starts.append((regress.sse(d, fit, sims), Xs, sims))
     e, Xs, sims = min(starts, key=lambda x: x[0])
     # one round of each: every form simulated costs (orders x runs) simulations per round
-    Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=1, sims=sims,
+    Xs, sims2, e2, _ = regress.gauss_newton(d, alt0, cands, Xs, orders, fit, steps=3, sims=sims,
                                             label=f"structure {name}", drop_rounds=1)
     return dict(zip([c.element for c in cands], Xs)), sims2
 
