@@ -510,7 +510,9 @@ def screen(d):
             "range_by_order": [[float(min(abs(r["X"][cand.element][i]) for r in as_well if cand.element in r["X"])),
                                 float(max(abs(r["X"][cand.element][i]) for r in as_well if cand.element in r["X"]))]
                                for i in range(len(Xc))]}
-        runs = per_run_estimates(d, fe["ranked"][0]) if fe is not None else {}
+        # an effect the check rejected and this form readmits is judged run by run too
+        fam = fe if fe is not None else _rejected_family(d, cand)
+        runs = per_run_estimates(d, fam["ranked"][0]) if fam is not None else {}
         if runs and chosen is not results[0]:
             # the layout's form was replaced: judge the runs' agreement in the chosen one
             try:
