@@ -52,7 +52,12 @@ def _periodic(c, y):
 
 
 def _weights(c):
-    return {s: 1.0 / np.sqrt(max(float(np.median(c.floors[s].S)), 1e-300)) for s in c.sensors}
+    """Per sensor, w with w^2 = 2 / (median S x fs): a sample's noise variance (S fs / 2
+    for a white floor S) weighted to 1, so a run counts by its duration and noise, not
+    by its sample rate (with w^2 = 1 / median S a 1 kHz run counted four times a 250 Hz
+    run of the same floor: independent c20's 100 ft/min run at 1 kHz, whose order 1
+    sits on a ripple-rung line mode, pulled the joint estimate to its own)."""
+    return {s: 1.0 / np.sqrt(max(0.5 * c.fs * float(np.median(c.floors[s].S)), 1e-300)) for s in c.sensors}
 
 
 def simulate(d, doc, ctxs, label):
@@ -81,7 +86,7 @@ def noise_sse(d, ctxs):
     for c in ctxs:
         band = max(0.5 * c.fs - c.fc, 0.0)
         for s in c.sensors:
-            e += float(c.mask.sum()) * band  # w^2 * median(S) * band per sample, w^2 = 1/median(S)
+            e += float(c.mask.sum()) * band / (0.5 * c.fs)  # w^2 * median(S) * band per sample
     return e
 
 
@@ -238,7 +243,7 @@ Z_ORDER = 23.0      # chi-square (2 dof) an order's drop must pass against its l
 def noise_drop(d, ctxs, cand, j):
     """Expected fall of :func:`sse` when an order-``j`` pair of regressors of ``cand``
     is fitted to noise alone: per regressor the noise variance at that order's
-    frequency, sigma^2 = S(f_j) fs / 2, in the weighted units (w^2 = 1/median S);
+    frequency, sigma^2 = S(f_j) fs / 2, in the weighted units (w^2 = 2 / (median S fs));
     the largest over the fit runs and sensors (a stacked fit removes about one
     regressor's worth of the noisiest block)."""
     return 2.0 * _local_variance(ctxs, cand, j, lambda c, s: c.floors[s])
@@ -246,14 +251,14 @@ def noise_drop(d, ctxs, cand, j):
 
 def _local_variance(ctxs, cand, j, floor_of):
     """Largest over the fit runs and sensors of the variance per regressor at order j's
-    frequency, in the weighted units of :func:`sse`: S(f_j) / median S x fs / 2, with
-    S from ``floor_of(ctx, sensor)`` (a NoiseFloor)."""
+    frequency, in the weighted units of :func:`sse`: S(f_j) fs / 2 x w^2 = S(f_j) /
+    median S, with S from ``floor_of(ctx, sensor)`` (a NoiseFloor)."""
     out = 0.0
     for c in ctxs:
         f = np.array([j * c.freq.get(cand.key, 0.0)])
         for s in c.sensors:
             S_med = max(float(np.median(c.floors[s].S)), 1e-300)
-            out = max(out, float(floor_of(c, s)(f)[0]) / S_med * 0.5 * c.fs)
+            out = max(out, float(floor_of(c, s)(f)[0]) / S_med)
     return out
 
 
