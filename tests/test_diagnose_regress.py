@@ -171,3 +171,19 @@ def test_a_form_that_gives_up_a_little_on_one_sensor_for_much_on_another_is_take
     ok, reason = structure._trade(d, {"lc9.T": 0.99, "lc19.T": 1.0}, {"lc9.T": 1.05, "lc19.T": 0.3}, left,
                                   "form sims", "raises lc9.T")
     assert not ok and "against the layout without the effects" in reason and "lc9.T" in reason
+
+
+def test_a_run_counts_by_its_noise_not_its_sample_rate():
+    """White noise of one per-sample sigma at 1 kHz and at 250 Hz: weighted, every sample
+    has variance 1 at both rates, so a run's weight in the joint fit follows its duration
+    and noise, not how often it was sampled. The floor is a Welch estimate over 60 s
+    (about 14 segments of 8 s, a running median over 4 Hz): within 10 %."""
+    from webline.diagnosis import estimate as est
+    from webline.diagnosis import regress
+    rng = np.random.default_rng(7)
+    sigma = 0.3
+    for fs in (1000.0, 250.0):
+        y = sigma * rng.standard_normal(int(60 * fs))
+        c = SimpleNamespace(fs=fs, sensors=["lc9.T"], floors={"lc9.T": est.NoiseFloor(y, fs, median_hz=4.0)})
+        w = regress._weights(c)["lc9.T"]
+        assert (w * sigma) ** 2 == pytest.approx(1.0, rel=0.1)
