@@ -242,24 +242,22 @@ def _stack(d, cand, fn):
 TRADE = 3.0   # NRMSE^2 a form must win on some sensors for each unit it gives up on others
 
 
-def _trade(d, cur_nr, nr, left_energy, sims, why_not):
-    """(accepted, reason) for a form that raises some sensor above the refined model
-    in the layout's form (``why_not``) but explains the line as a whole far better:
-    it wins ``TRADE`` times the NRMSE^2 it gives up, and against the model without
-    the effects (the layout as given) it passes the check of every effect.
+def _trade(cur_nr, nom_nr, nr, e_nom, e_form, why_not, max_worse):
+    """(accepted, reason) for a form whose NRMSE per sensor ``nr`` raises some sensor
+    above the refined model in the layout's form (``cur_nr``; ``why_not``) but
+    explains the line as a whole far better: it wins ``TRADE`` times the NRMSE^2 it
+    gives up, and against the layout without the effects (``nom_nr``; ``e_nom`` /
+    ``e_form`` the residual energy where the effects act) it passes the check.
 
     Independent c12 (a 0.69 mm roller9 and a 0.05 mm idler_r1 at the same frequency,
     truth without feed-forward): in the layout's form the S-wrap blocks roller9's line,
     lc9 fits to 0.61 and lc19 stays at 0.98; without feed-forward lc9 is 0.72 and
     lc19 0.49, the run-out 0.64 mm for 0.69 (0.85 mm in the layout's form)."""
-    fit = d.fit_ctx()
-    nominal = {c.name: c.nominal for c in fit}
-    nom_nr, _ = _score(d, nominal)
     gain = sum(max(0.0, cur_nr[s] ** 2 - nr[s] ** 2) for s in cur_nr if s in nr)
     loss = sum(max(0.0, nr[s] ** 2 - cur_nr[s] ** 2) for s in cur_nr if s in nr)
     if not gain >= TRADE * loss:
         return False, why_not
-    ok, reason = claims.decide(nom_nr, nr, left_energy(nominal), left_energy(sims), None, d.opt.max_worse)
+    ok, reason = claims.decide(nom_nr, nr, e_nom, e_form, None, max_worse)
     if not ok:
         return False, f"{why_not}; against the layout without the effects it {reason}"
     worse = ", ".join(f"{s} {cur_nr[s]:.3g} -> {nr[s]:.3g}" for s in cur_nr if s in nr and nr[s] > cur_nr[s])
@@ -470,7 +468,8 @@ def screen(d):
         e_best = left_energy(best["sims"])
         ok, reason = claims.decide(cur_nr, best["nrmse"], e_cur, e_best, None, d.opt.max_worse)
         if not ok:
-            ok, reason = _trade(d, cur_nr, best["nrmse"], left_energy, best["sims"], reason)
+            ok, reason = _trade(cur_nr, nom_nr, best["nrmse"], left_energy({c.name: c.nominal for c in fit}),
+                                e_best, reason, d.opt.max_worse)
         best["check"] = {"accepted": ok, "reason": reason, "local_before": e_cur, "local_after": e_best}
         if ok:
             chosen = best
@@ -511,7 +510,7 @@ def screen(d):
                                 float(max(abs(r["X"][cand.element][i]) for r in as_well if cand.element in r["X"]))]
                                for i in range(len(Xc))]}
         # an effect the check rejected and this form readmits is judged run by run too
-        fam = fe if fe is not None else _rejected_family(d, cand)
+        fam = _family(d, cand, fe)
         runs = per_run_estimates(d, fam["ranked"][0]) if fam is not None else {}
         if runs and chosen is not results[0]:
             # the layout's form was replaced: judge the runs' agreement in the chosen one
@@ -589,7 +588,7 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
     # c20: an unwind's order 1, 0.32 mm, pruned in the layout's form); the form's own
     # fit prunes again by simulation
     orders = [sorted({j + 1 for j in np.flatnonzero(np.abs(X0) > 0)}
-                     | _strong_orders(fe if fe is not None else _rejected_family(d, cand), cand, len(X0)))
+                     | _strong_orders(_family(d, cand, fe), cand, len(X0)))
               for cand, X0, fe in use]
     use = [(cand, X0) for cand, X0, _ in use]
     starts = []
@@ -604,10 +603,13 @@ def _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all):
     return dict(zip([c.element for c in cands], Xs)), sims2
 
 
-def _rejected_family(d, cand):
-    """The family record of an effect the check rejected (its strong orders count as
-    a reported effect's do: independent c20, an unwind rejected in the layout's form
-    with its 0.32 mm order 1 pruned there)."""
+def _family(d, cand, fe):
+    """The family record of an effect: its own ``fe`` if reported, else the record the
+    check's rejection kept (a rejected effect's strong orders and run-by-run estimates
+    count as a reported effect's do: independent c20, an unwind rejected in the layout's
+    form with its 0.32 mm order 1 pruned there)."""
+    if fe is not None:
+        return fe
     return next((r.get("_fe") for r in getattr(d, "rejected", []) if r.get("_cand") is cand), None)
 
 

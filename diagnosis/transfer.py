@@ -194,6 +194,7 @@ def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
                     w.append(ws * c.T / 2.0)   # |Y|^2 w is the harmonic's z (Exp(1) for noise)
             return np.array(v, complex), np.array(w, float)
         m, wm = vec(M, fit)
+        m_run = [(j * c.freq.get(cand.key, 0.0), c, vec(M, [c])) for c in fit]   # each fit run alone
         alphas, chi2, trends = [], [], []
         for Gk in G:
             gk, _ = vec(Gk, fit)
@@ -201,7 +202,7 @@ def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
             a = complex(np.sum(wm * np.conj(gk) * m)) / den if den > 0 else 0.0
             alphas.append(a)
             chi2.append(float(np.sum(wm * np.abs(m - a * gk) ** 2)))
-            trends.append(alpha_trend([(j * c.freq.get(cand.key, 0.0), vec(Gk, [c]), vec(M, [c])) for c in fit], a))
+            trends.append(alpha_trend([(f, vec(Gk, [c]), mc) for f, c, mc in m_run], a))
         # how well each line explains the fit runs' pattern over sensors and runs; a
         # model-form error inflates every line's misfit, so the scale is tempered by the best
         dof = max(2 * len(m) - 2, 1)

@@ -145,31 +145,29 @@ def test_an_effect_the_check_rejected_keeps_its_strong_orders_for_the_form_scree
     fam = {"eff": {"group": [{"cand": cand, "fits": {"run1": 0, "run2": 0},
                               "z_order": {1: 152.0, 2: 4.2, 3: 853.0, 6: 9.5}}]}}
     d = SimpleNamespace(rejected=[{"element": "sw_leader"}, {"_cand": cand, "_X": [0, 0, 1e-5], "_fe": fam}])
-    assert structure._strong_orders(structure._rejected_family(d, cand), cand, 6) == {1, 3}
+    assert structure._strong_orders(structure._family(d, cand, None), cand, 6) == {1, 3}
     # z of order 1 under 25 per run (2 runs): not strong
     fam["eff"]["group"][0]["z_order"][1] = 49.0
-    assert structure._strong_orders(structure._rejected_family(d, cand), cand, 6) == {3}
-    assert structure._rejected_family(SimpleNamespace(rejected=[]), cand) is None
+    assert structure._strong_orders(structure._family(d, cand, None), cand, 6) == {3}
+    assert structure._family(SimpleNamespace(rejected=[]), cand, None) is None
 
 
-def test_a_form_that_gives_up_a_little_on_one_sensor_for_much_on_another_is_taken(monkeypatch):
+def test_a_form_that_gives_up_a_little_on_one_sensor_for_much_on_another_is_taken():
     """The rule on numbers (independent c12: the layout's form fits lc9 to 0.611 and
     leaves lc19 at 0.985; without feed-forward lc9 0.723, lc19 0.485)."""
     from webline.diagnosis import structure
     nominal = {"lc9.T": 1.00, "lc19.T": 1.01}
-    monkeypatch.setattr(structure, "_score", lambda d, sims: (nominal, sum(v * v for v in nominal.values())))
-    d = SimpleNamespace(fit_ctx=lambda: [SimpleNamespace(name="run1", nominal="nominal sims")],
-                        opt=SimpleNamespace(max_worse=0.02))
-    left = (lambda sims: 1.0 if sims == {"run1": "nominal sims"} else 0.2)   # the residual where the effect acts
+    e_nom, e_form = 1.0, 0.2   # the residual where the effect acts
     cur = {"lc9.T": 0.611, "lc19.T": 0.985}
-    ok, reason = structure._trade(d, cur, {"lc9.T": 0.723, "lc19.T": 0.485}, left, "form sims", "raises lc9.T")
+    ok, reason = structure._trade(cur, nominal, {"lc9.T": 0.723, "lc19.T": 0.485}, e_nom, e_form,
+                                  "raises lc9.T", 0.02)
     assert ok and "lc9.T 0.611 -> 0.723" in reason   # wins 0.735 for 0.149
     # wins less than TRADE times what it gives up (0.160 for 0.267): the first reason stands
-    assert structure._trade(d, cur, {"lc9.T": 0.80, "lc19.T": 0.90}, left, "form sims", "raises lc9.T") == \
+    assert structure._trade(cur, nominal, {"lc9.T": 0.80, "lc19.T": 0.90}, e_nom, e_form, "raises lc9.T", 0.02) == \
         (False, "raises lc9.T")
     # a sensor above the layout without the effects (lc9 1.05 for 1.00, limit 2 %) is never traded
-    ok, reason = structure._trade(d, {"lc9.T": 0.99, "lc19.T": 1.0}, {"lc9.T": 1.05, "lc19.T": 0.3}, left,
-                                  "form sims", "raises lc9.T")
+    ok, reason = structure._trade({"lc9.T": 0.99, "lc19.T": 1.0}, nominal, {"lc9.T": 1.05, "lc19.T": 0.3},
+                                  e_nom, e_form, "raises lc9.T", 0.02)
     assert not ok and "against the layout without the effects" in reason and "lc9.T" in reason
 
 
