@@ -46,7 +46,11 @@ drive effect and compares the difference with the measurement error the case
 injected (regenerated from its seed), as a whitened matched-filter SNR overall
 and where the effect acts (compliance: the band around its torsional mode;
 backlash: around the times its drive torque is at zero); detectable = that SNR,
-combined over load cells and fit runs, >= DETECT_SNR.
+combined over load cells and fit runs, >= DETECT_SNR. Where the drives carry a
+torque ripple, the SNR counted is what a diagnosis could reach without the
+ripple's sequence: the matched filter on the effect's deterministic part (truth
+with and without it, both without ripple) or the energy detector's deflection
+on the ripple-rung part's spectrum, whichever is larger.
 """
 import copy
 import json
@@ -731,7 +735,7 @@ def forms_summary(results):
 
 
 # ============================================================ detectability ====
-DETECT_SNR = 5.0          # matched-filter SNR a drive effect needs to count as detectable
+DETECT_SNR = 5.0          # SNR (or deflection) a drive effect needs to count as detectable
 BAND_REL = 0.3            # compliance: band f_t * (1 -+ BAND_REL) around the torsional mode
 REVERSAL_WINDOW_S = 0.5   # backlash: +- this around each time the truth's drive torque reaches zero
 REVERSAL_EPS_NM = 0.01    # torque within +- this of zero is no side (as B.torque_reverses) ...
@@ -858,9 +862,18 @@ def _combine(per):
     if all("snr_where_without_ripple" in v for v in per):
         extra["snr_where_without_ripple"] = math.sqrt(sum(v["snr_where_without_ripple"] ** 2 for v in per))
     # detectable: the effect's own signature (where it acts) stands out of the error; visible
-    # overall only: the data differ (e.g. a shaft changing how run-out passes) but not there
-    return {"snr_where": snr, "snr_all": snr_all, "threshold": DETECT_SNR, "detectable": bool(snr >= DETECT_SNR),
-            "visible_overall": bool(snr_all >= DETECT_SNR), **extra}
+    # overall only: the data differ (e.g. a shaft changing how run-out passes) but not there.
+    # Under a drive torque ripple the matched filter's SNR needs the ripple's sequence, which
+    # no diagnosis has: what it can know is the effect's deterministic part (the truth with
+    # and without it, both without ripple; a matched filter on a waveform a model can
+    # simulate) or the ripple-rung part's spectrum (an energy detector)
+    if "snr_where_without_ripple" in extra:
+        basis = max(extra["snr_where_without_ripple"], extra.get("deflection_where", 0.0))
+        how = "deterministic part's SNR or spectral deflection (the ripple's sequence is unknown)"
+    else:
+        basis, how = snr, "matched-filter SNR where it acts"
+    return {"snr_where": snr, "snr_all": snr_all, "threshold": DETECT_SNR, "detectable": bool(basis >= DETECT_SNR),
+            "detect_value": basis, "detect_basis": how, "visible_overall": bool(snr_all >= DETECT_SNR), **extra}
 
 
 def _layout_without(truth, line_doc, line_path, index):

@@ -1066,6 +1066,12 @@ class Diagnosis:
             t0 = _time.perf_counter()
             transfer.screen(self)
             self.timings["transfer"] = _time.perf_counter() - t0
+        if self.opt.ripple and self.opt.other_effects:
+            # a shaft rung by the drives' ripple: seen in the residual's spectrum, not its waveform
+            from webline.diagnosis import compliance
+            t0 = _time.perf_counter()
+            compliance.screen(self)
+            self.timings["compliance"] = _time.perf_counter() - t0
         if self.out:
             self.out.mkdir(parents=True, exist_ok=True)
             self.model.write_doc(self.refined_doc, self.out / "refined_layout.yaml")

@@ -34,7 +34,7 @@ def build(d):
         "timings_s": d.timings,
         "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall},
     }
-    from webline.diagnosis import claims, ripple
+    from webline.diagnosis import claims, compliance, ripple
     fit = [c for c in d.ctx if c.fit]
     hold = [c for c in d.ctx if not c.fit]
     first, last = d.steps[0], d.steps[-1]
@@ -77,7 +77,8 @@ def build(d):
     rep["left"] = claims.leftovers(d, d.noise, rep["remaining_peaks"])
     rf = ripple.screen(d, d.noise) if d.opt.ripple else {}
     rep["ripple"] = {r: {"levels_Nm_per_rtHz": v["levels_Nm_per_rtHz"]} for r, v in rf.items()} or None
-    rep["findings"] = claims.humps(d, d.noise, ripple_fit=rf)
+    rep["findings"] = compliance.label(claims.humps(d, d.noise, ripple_fit=rf), getattr(d, "compliance", None))
+    rep["compliance"] = getattr(d, "compliance", None)
     rep["rejected"] = _rejected(d)
     rep["structure"] = getattr(d, "structure", None)
     rep["transfer"] = getattr(d, "transfer", None)
@@ -406,7 +407,7 @@ def _verdict(rep):
         f = e.get("fundamental_hz")
         parts.append(f"{e['kind']} of {c}" + (f" (f = {f:.3g} Hz)" if f else "")
                      + f", explains {100 * e['explained_share']:.0f} % of the "
-                     + ("periodic residual" if e.get("harmonics") else "residual left"))
+                     + (e.get("explains_what") or ("periodic residual" if e.get("harmonics") else "residual left")))
     g = []
     for s, v in rep["gap"].items():
         if v["nominal"] and v["refined"]:

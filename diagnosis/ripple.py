@@ -70,10 +70,12 @@ def probe_doc(doc, element, dt):
     return layout_edit.with_set(doc, f"drives.speed_loops.{element}.noise_seed", SEED)
 
 
-def responses(d, doc, sims):
+def responses(d, doc, sims, view=None):
     """{run: {drive: {sensor: PSD per unit density^2}}} of the refined model (``doc``,
     its simulations ``sims`` by run) on every run, and {run: frequency grid} (runs
-    may differ in sample rate)."""
+    may differ in sample rate). ``view`` (p, f) -> PSD: how the Welch PSD is
+    smoothed (default :func:`smooth`)."""
+    view = view or smooth
     jobs, keys = [], []
     for c in d.ctx:  # held-out runs too: the fit reads the residual's spectrum, no effect's estimate
         dt = _hold_step(sims[c.name].system)
@@ -88,7 +90,7 @@ def responses(d, doc, sims):
         per = out.setdefault(c.name, {}).setdefault(el, {})
         for s in c.sensors:
             f, p = welch((sim.columns[s] - sims[c.name].columns[s])[c.mask], c.fs)
-            per[s] = smooth(p, f) / PROBE_DENSITY ** 2
+            per[s] = view(p, f) / PROBE_DENSITY ** 2
             freqs[c.name] = f
     return out, freqs
 

@@ -51,6 +51,19 @@ def test_compliance_visibility_counts_only_its_band():
     assert c["snr_where"] == pytest.approx(6.0) and c["detectable"]
 
 
+def test_under_a_torque_ripple_detectable_asks_what_a_diagnosis_can_know():
+    # a matched-filter SNR of 9 that needs the ripple's sequence does not count; the
+    # deterministic part's SNR or the spectral deflection does, whichever is larger
+    hidden = {"snr_where": 9.0, "snr_all": 10.0, "snr_where_without_ripple": 0.6, "deflection_where": 2.4}
+    c = BI._combine([hidden])
+    assert c["snr_where"] == 9.0 and not c["detectable"] and c["detect_value"] == 2.4
+    assert BI._combine([dict(hidden, deflection_where=5.5)])["detectable"]
+    assert BI._combine([{k: v for k, v in hidden.items() if k != "deflection_where"} |
+                        {"snr_where_without_ripple": 6.0}])["detectable"]
+    # two records of deflection 4 each add in quadrature to 5.7
+    assert BI._combine([dict(hidden, deflection_where=4.0)] * 2)["detectable"]
+
+
 def test_stochastic_deflection_of_a_random_difference_is_its_power_ratio_per_bin():
     # a random difference with a^2 the noise's power per bin: P_k/S_k ~ a^2 in every bin, so
     # sqrt(sum (P/S)^2) = a^2 sqrt(bins); both periodograms are smoothed over 0.5 Hz (31 bins

@@ -1,0 +1,226 @@
+"""A compliant drive shaft behind an unexplained residual hump.
+
+A shaft between motor and roller makes a lightly damped two-mass mode. The
+drive's broadband torque (current ripple, PWM) rings it, and the residual of
+a model with rigid drives shows a hump at a fixed frequency that follows no
+element's speed (:func:`diagnosis.claims.humps`). The deterministic screen of
+:mod:`diagnosis.others` cannot see it: with no ripple in the simulation the
+shaft barely changes the model's output. Here the hump is read the way it was
+made:
+
+* for each driven element with an ideal drive, the refined layout gets a
+  shaft whose torsional mode sits on a short grid around the hump's top
+  (:data:`SCAN`, damping ratio 5 %, 30 % of the inertia on the motor side,
+  as :func:`diagnosis.others._drive_doc`);
+* the drives' ripple responses of that layout (:func:`diagnosis.ripple.responses`)
+  are fitted to the residual's spectrum (:func:`diagnosis.ripple.fit_levels`),
+  and the share of the hump's excess they reproduce is compared with the
+  rigid line's (:func:`diagnosis.ripple.explained`).
+
+A shaft is claimed only when it reproduces at least ``ripple.EXPLAINED`` of
+the hump and :data:`MARGIN` more than the rigid line does, and when the
+refined layout with it, re-simulated on the fit runs, raises no sensor's
+NRMSE by more than ``Options.max_worse``. The elements whose shafts explain
+the hump about as well are its candidates; the torsional frequency is the
+grid point that explains most.
+"""
+import copy
+import logging
+import math
+
+import numpy as np
+
+from webline.diagnosis import claims, others, ripple
+
+log = logging.getLogger("webline.diagnose")
+
+F_MIN_HZ = 1.5      # below it a hump is drift, 1/f noise or the line's slow tension modes, not a shaft
+SCAN = (0.7, 0.8, 0.9, 1.0, 1.12, 1.25)   # torsional frequency / the hump's top
+ZETAS = (0.03, 0.08)   # damping ratios tried: the peak's width
+MARGIN = 0.25       # relative drop of the spectral misfit a shaft must bring over the rigid line's ripple fit
+SAME = 0.1          # candidates: elements whose shaft's misfit is within this share of the best
+MAX_HUMPS = 2       # humps tried, strongest first (each costs a grid of simulations per drive)
+
+
+def fine(p, f):
+    """A 3-bin mean of the Welch PSD (0.75 Hz): a mode with a damping ratio of a few per
+    cent keeps its peak, which the 2 Hz running median of :func:`ripple.smooth` flattens."""
+    return np.convolve(p, np.ones(3) / 3.0, mode="same")
+
+
+def band_of(hump, fs):
+    """Where a shaft's mode near the hump's top is compared: half to twice its frequency."""
+    fh = hump["frequency_hz"]
+    return max(0.5 * fh, F_MIN_HZ / 2), min(2.0 * fh, 0.45 * fs)
+
+
+def spectral_fit(d, noise, doc, sims, hump):
+    """The ripple fit of ``doc`` (simulated as ``sims``) to the residual spectrum of the
+    hump's run, both load cells at once, on the fine view over :func:`band_of`, with a
+    white and a 1/f floor free per sensor (the floor near a mode is not the sensor's
+    white noise alone). Returns (misfit: mean squared log ratio of data to fit,
+    explained: share of the hump's excess the ripple part reproduces, levels)."""
+    c = next((c for c in d.ctx if c.name == hump["run"]), None)
+    if c is None:
+        return None
+    G, freqs = ripple.responses(_only(d, c), doc, sims, view=fine)
+    if c.name not in G:
+        return None
+    f = freqs[c.name]
+    band = band_of(hump, c.fs)
+    m = (f >= band[0]) & (f <= band[1])
+    P, S0 = {}, {}
+    for s in c.sensors:
+        _, p = ripple.welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs)
+        P[s] = fine(p, f)
+        S0[s] = noise[c.name][s]["psd_N2_per_hz"]
+    Gx = dict(G[c.name])
+    ff = np.maximum(f, f[1])
+    for s in P:  # free floors, per sensor (scaled near the data so the solver sees them)
+        Gx[f"_white {s}"] = {q: (np.full_like(f, S0[s]) if q == s else np.zeros_like(f)) for q in P}
+        Gx[f"_pink {s}"] = {q: (S0[s] * band[0] / ff if q == s else np.zeros_like(f)) for q in P}
+    levels, R = ripple.fit_levels(P, Gx, {s: 0.0 for s in P}, f, band=band)
+    mis = float(np.mean(np.concatenate([np.log(np.maximum(P[s][m], 1e-300) / np.maximum(R[s][m], 1e-300)) ** 2
+                                        for s in P])))
+    s = hump["sensor"]
+    floor = sum(levels[k] * Gx[k][s] for k in Gx if k.startswith("_"))
+    rip = R[s] - floor
+    ex = np.maximum(P[s][m] - floor[m], 0.0)
+    x = float(np.sum(np.minimum(rip[m], ex)) / np.sum(ex)) if np.sum(ex) > 0 else None
+    return mis, x, {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")}
+
+
+class _only:
+    """A diagnosis seen through one run (the probes simulate that run only)."""
+    def __init__(self, d, c):
+        self.ctx, self.model = [c], d.model
+
+
+def screen(d):
+    """Try a compliant shaft on every ideal drive for the strongest unexplained
+    humps of the refined residual; a claimed shaft joins ``d.other`` and the
+    refined layout as a step, a refused one ``d.rejected``. Records what was
+    tried in ``d.compliance``."""
+    if not hasattr(d, "noise"):
+        d.noise = claims.sensor_noise(d)
+    noise = d.noise
+    rf = ripple.screen(d, noise)
+    if not rf:
+        return
+    humps = [h for h in claims.humps(d, noise, ripple_fit=rf)
+             if h["kind"] == "unexplained resonance" and h["frequency_hz"] >= F_MIN_HZ]
+    specs = others.drive_candidates(d)
+    d.compliance = []
+    fit = d.fit_ctx()
+    for hump in humps[:MAX_HUMPS]:
+        if not specs:
+            break
+        c = next(c for c in d.ctx if c.name == hump["run"])
+        fh = hump["frequency_hz"]
+        base = spectral_fit(d, noise, d.refined_doc, d.steps[-1]["sims"], hump)
+        if base is None:
+            continue
+        tried = []
+        for spec in specs:
+            best = None
+            for r in SCAN:
+                for zeta in ZETAS:
+                    doc = others._drive_doc(copy.deepcopy(d.refined_doc), spec, r * fh, 0.0, zeta=zeta)
+                    try:
+                        sims = d._simulate_all(doc, f"shaft {spec[0]} {r * fh:.3g} Hz", ctxs=[c])
+                    except Exception as exc:  # a shaft the engine cannot run is no candidate
+                        log.info("  shaft of %s at %.3g Hz failed: %s", spec[0], r * fh,
+                                 (str(exc).splitlines() or [""])[0][:200])
+                        continue
+                    got = spectral_fit(d, noise, doc, sims, hump)
+                    if got is not None and (best is None or got[0] < best["misfit"]):
+                        best = {"element": spec[0], "torsional_hz": r * fh, "zeta": zeta, "misfit": got[0],
+                                "explained": got[1], "levels": got[2], "spec": spec, "doc": doc}
+            if best is not None:
+                tried.append(best)
+                log.info("  shaft of %-10s at %5.3g Hz (zeta %.2g): spectral misfit %.3g (rigid line %.3g), "
+                         "explains %s of the hump near %.3g Hz on %s", best["element"], best["torsional_hz"],
+                         best["zeta"], best["misfit"], base[0],
+                         "-" if best["explained"] is None else f"{100 * best['explained']:.0f} %", fh, hump["sensor"])
+        rec = {"hump": {k: hump[k] for k in ("run", "sensor", "frequency_hz", "band_hz", "share_of_residual")},
+               "rigid": {"misfit": base[0], "explains": base[1]},
+               "tried": [{k: t[k] for k in ("element", "torsional_hz", "zeta", "misfit", "explained")} for t in tried],
+               "claimed": None}
+        d.compliance.append(rec)
+        if not tried:
+            continue
+        tried.sort(key=lambda t: t["misfit"])
+        b = tried[0]
+        gain = 1.0 - b["misfit"] / base[0] if base[0] > 0 else 0.0
+        if gain < MARGIN or (b["explained"] or 0.0) < ripple.EXPLAINED:
+            rec["why"] = (f"the best shaft ({b['element']}, {b['torsional_hz']:.3g} Hz) lowers the spectral "
+                          f"misfit by {100 * gain:.0f} % (needs {100 * MARGIN:.0f} %) and explains "
+                          f"{100 * (b['explained'] or 0.0):.0f} % of the hump (needs {100 * ripple.EXPLAINED:.0f} %)")
+            log.info("  no shaft claimed: %s", rec["why"])
+            continue
+        sims_b = d._simulate_all(b["doc"], f"refined +{b['element']} compliance")
+        sims0 = d.steps[-1]["sims"]
+        sensors = list(dict.fromkeys(s for c in fit for s in c.sensors))
+        nb = {s: claims.nrmse_over(fit, sims0, s) for s in sensors}
+        na = {s: claims.nrmse_over(fit, sims_b, s) for s in sensors}
+        bad = {s: (na[s] - nb[s]) / nb[s] for s in sensors
+               if nb[s] > 0 and np.isfinite(na[s]) and (na[s] - nb[s]) / nb[s] > d.opt.max_worse}
+        chk = {"accepted": not bad, "nrmse_before": nb, "nrmse_after": na,
+               "spectral_misfit_before": base[0], "spectral_misfit_after": b["misfit"],
+               "hump_explained_before": base[1], "hump_explained_after": b["explained"],
+               "reason": ("the ripple through the shaft reproduces the hump" if not bad else
+                          "raises {} NRMSE by {:.1f} % (limit {:.0f} %)".format(
+                              *max(((s, 100 * w) for s, w in bad.items()), key=lambda x: x[1]),
+                              100 * d.opt.max_worse))}
+        if bad:
+            d._reject(b["element"], "compliance", "shaft check", None, reason=chk["reason"],
+                      nrmse_before=nb, nrmse_after=na, torsional_hz=b["torsional_hz"])
+            rec["why"] = chk["reason"]
+            continue
+        # candidates: shafts elsewhere that fit about as well (the misfit's own scatter)
+        same = [t for t in tried[1:] if 1.0 - b["misfit"] / t["misfit"] < SAME]
+        nxt = tried[1]["misfit"] if len(tried) > 1 else base[0]
+        spec, ft, zeta = b["spec"], b["torsional_hz"], b["zeta"]
+        eff = {
+            "element": b["element"], "kind": "compliance",
+            "candidates": [{"element": t["element"], "kind": "compliance", "explained_share": t["explained"]}
+                           for t in [b] + same],
+            "fundamental_hz": ft,
+            "harmonics": [],
+            "explained_share": b["explained"],
+            "explains_what": f"residual hump near {fh:.3g} Hz on {hump['sensor'].split('.')[0]} (its spectrum)",
+            "confidence": float(np.clip(1.0 - b["misfit"] / nxt, 0.0, 1.0)),
+            "confidence_basis": (f"a shaft on {b['element']} with its torsional mode at {ft:.3g} Hz lets the drives' "
+                                 f"torque ripple reproduce {100 * b['explained']:.0f} % of the residual hump near "
+                                 f"{fh:.3g} Hz on {hump['sensor'].split('.')[0]} (run {hump['run']}); spectral misfit "
+                                 f"{b['misfit']:.3g}, rigid line {base[0]:.3g}, next element {nxt:.3g}"),
+            "parameters": {"torsional_frequency": {"estimated": ft, "unit": "Hz"},
+                           "damping_ratio": {"estimated": zeta, "unit": "1"},
+                           "motor_inertia": {"estimated": others.MOTOR_SHARE * spec[1], "unit": "kg*m^2"},
+                           "ripple_density": {"estimated": b["levels"].get(b["element"]), "unit": "N*m/sqrt(Hz)"}},
+            "detail": f"{b['element']} compliance, torsional mode {ft:.3g} Hz (from the residual's spectrum)",
+            "check": chk,
+            "apply_doc": (lambda doc, spec=spec, ft=ft, zeta=zeta: others._drive_doc(doc, spec, ft, 0.0, zeta=zeta)),
+        }
+        rec["claimed"] = b["element"]
+        d.other = list(getattr(d, "other", []) or []) + [eff]
+        d.refined_doc = b["doc"]
+        d.steps.append({"added": b["element"], "kind": "compliance", "sims": sims_b, "check": chk})
+        specs = [sp for sp in specs if sp[0] != b["element"]]
+        log.info("  claimed: %s", eff["detail"])
+
+
+def label(findings, records):
+    """The humps of ``findings`` (claims.humps) that a claimed shaft (``records``, as
+    :func:`screen` leaves them in ``d.compliance``) reproduces: said so, not unexplained."""
+    for h in findings:
+        for rec in records or []:
+            hp = rec["hump"]
+            if rec.get("claimed") and hp["run"] == h["run"] and hp["sensor"] == h["sensor"] \
+                    and abs(hp["frequency_hz"] - h["frequency_hz"]) <= 0.15 * hp["frequency_hz"]:
+                t = next(t for t in rec["tried"] if t["element"] == rec["claimed"])
+                h["kind"] = "drive shaft mode"
+                h["text"] = (f"the torsional mode of {rec['claimed']}'s shaft near {t['torsional_hz']:.3g} Hz on "
+                             f"{h['sensor'].split('.')[0]}, rung by the drive's torque ripple: claimed as an effect "
+                             f"({100 * h['share_of_residual']:.0f} % of the refined residual, run {h['run']})")
+    return findings
