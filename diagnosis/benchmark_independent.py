@@ -17,7 +17,11 @@ gets
   rolls +-2 % (the unwind's per run, against the radius the run file states);
 * **in excitation**: every drive's torque carries a white ripple of 0.2-1 % of
   its element's R T_max (:func:`draw_ripple`, :func:`ripple_set`), as real
-  drives do; a lightly damped mode (a compliant shaft) shows through it;
+  drives do; a lightly damped mode (a compliant shaft) shows through it. The
+  drive of a hidden compliance has its ripple raised until the shaft's mode
+  reaches a drawn visibility (:func:`draw_visibility`: the deflection of an
+  energy detector, 5-500, log-uniform): at the drawn ripple alone no method
+  without the ripple's sequence could see it (seed 0: deflections 2.4 and 3.1);
 * **in simulator**: the truth is the monolithic engine (:func:`simulate_truth`:
   ``orchestrator.engine.simulate`` when it exists, else the scipy reference
   :func:`orchestrator.reference.simulate_reference`), never the co-simulation
@@ -121,6 +125,8 @@ class TruthModel:
     forms: dict = field(default_factory=dict)    # drawn model-form differences
     params: dict = field(default_factory=dict)   # drawn parameter scale factors
     ripple: dict = field(default_factory=dict)   # drive torque ripple: {element: share of R T_max}
+    visibility: dict = field(default_factory=dict)    # compliant drive: {element: deflection its mode must reach}
+    ripple_scale: dict = field(default_factory=dict)  # {element: factor on its drawn ripple that reached it}
 
 
 @dataclass
@@ -163,6 +169,37 @@ def draw_ripple(seed, line_doc):
     its own stream (the case's other draws stay as they were)."""
     r = np.random.default_rng([seed, 9006])
     return {el: _log_uniform(r, *RIPPLE_SHARE) for el in line_doc["drives"]["speed_loops"]}
+
+
+COMPLIANCE_DEFLECTION = (5.0, 500.0)   # a shaft's mode: energy-detector deflection drawn log-uniform
+VISIBILITY_TRIES = 4                   # truth simulations that may raise the shaft drive's ripple
+VISIBILITY_REACHED = 0.8               # share of the drawn deflection that counts as reached
+
+
+def draw_visibility(seed, effects):
+    """How visible each hidden compliance is to be: the deflection of an energy
+    detector (:func:`stochastic_deflection`, combined over load cells and fit runs)
+    that its mode, rung by its drive's ripple, reaches. A shaft no method can see
+    without the ripple's sequence measures the generator, not the diagnosis; from
+    the detection threshold to a hump that dominates the residual (the issue's
+    example reaches about 240). Its own stream: the other draws stay as they were."""
+    r = np.random.default_rng([seed, 9007])
+    return {e.element: _log_uniform(r, *COMPLIANCE_DEFLECTION) for e in effects if e.kind == "compliance"}
+
+
+def visibility_scale(model, truth):
+    """{element: factor on its drive's ripple} still needed for each hidden compliance
+    to reach its drawn deflection (empty when all have). A ripple-rung mode's
+    deflection grows with the ripple's power, a little slower where the effect's
+    deterministic part and the floor weigh: the square root of the ratio, and
+    :data:`VISIBILITY_TRIES` truth simulations, get there."""
+    out = {}
+    for e in truth["effects"]:
+        target = model.visibility.get(e["element"]) if e["kind"] == "compliance" else None
+        dv = (e.get("detectable") or {}).get("deflection_where")
+        if target and dv is not None and dv < VISIBILITY_REACHED * target:
+            out[e["element"]] = float(np.clip(math.sqrt(target / max(dv, 1e-3)), 1.0, 10.0))
+    return out
 
 
 def ripple_set(ripple, facts, T_max, fs_hz, seed):
@@ -261,6 +298,7 @@ def draw_cases(n, seed=0, *, quick=False, layout_doc=None, facts=None):
         for e in c.effects:  # a drive effect moves a share of the *truth's* inertia to the motor
             effects.append(B.draw_drive(r, e.kind, e.element, tdoc) if e.kind in B.DRIVE_KINDS else e)
         model.ripple = draw_ripple(c.seed, layout_doc)
+        model.visibility = draw_visibility(c.seed, effects)
         out.append(ICase(id=c.id, category=c.category, effects=effects, runs=_draw_runs(r, c.category, quick),
                          seed=c.seed, model=model))
     return out
@@ -371,7 +409,22 @@ def make_case(case, folder, line_doc, fmu_paths=None, *, simulate=None):
     """Write the case (blind/: the nominal layout and the run files; truth/: the
     truth layout and truth.json), simulating the truth with the monolithic
     engine. ``simulate`` (system, t_eval) -> Result replaces
-    :func:`simulate_truth` (tests). Returns the truth record."""
+    :func:`simulate_truth` (tests). A hidden compliance's drive ripple is raised
+    until its mode reaches the drawn deflection (:func:`draw_visibility`,
+    :func:`visibility_scale`). Returns the truth record."""
+    truth = _make_once(case, folder, line_doc, simulate=simulate)
+    for _ in range(VISIBILITY_TRIES - 1):
+        more = visibility_scale(case.model, truth)
+        if not more:
+            break
+        for el, k in more.items():
+            case.model.ripple_scale[el] = case.model.ripple_scale.get(el, 1.0) * k
+        truth = _make_once(case, folder, line_doc, simulate=simulate)
+    return truth
+
+
+def _make_once(case, folder, line_doc, *, simulate=None):
+    """One generation of the case (see :func:`make_case`)."""
     from webline.orchestrator.layout import load_system
     from webline.diagnosis.synthetic import pulse_train
     simulate = simulate or simulate_truth
@@ -392,7 +445,8 @@ def make_case(case, folder, line_doc, fmu_paths=None, *, simulate=None):
         exp = run_conditions(run)
         texp = copy.deepcopy(exp)
         texp["roll_radius"] = {"unwind": f"{run.unwind_radius_in * B.INCH * run.radius_scale:.6g} m"}
-        rset = ripple_set(case.model.ripple, facts, T_max, run.fs_hz, run.seed)
+        ripple = {el: v * case.model.ripple_scale.get(el, 1.0) for el, v in case.model.ripple.items()}
+        rset = ripple_set(ripple, facts, T_max, run.fs_hz, run.seed)
         system = load_system(truth_layout, {**B._overrides(texp), **rset})
         t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
         res = simulate(system, t)

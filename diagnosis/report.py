@@ -75,7 +75,9 @@ def build(d):
     rep["across_runs"] = _across_runs(d, rep)
     rep["noise_floor"] = {r: {s: {k: v for k, v in x.items()} for s, x in per.items()} for r, per in d.noise.items()}
     rep["left"] = claims.leftovers(d, d.noise, rep["remaining_peaks"])
-    rf = ripple.screen(d, d.noise) if d.opt.ripple else {}
+    done = getattr(d, "ripple_fit", None)
+    rf = (done[1] if done is not None and done[0] is d.refined_doc else ripple.screen(d, d.noise)) \
+        if d.opt.ripple else {}
     rep["ripple"] = {r: {"levels_Nm_per_rtHz": v["levels_Nm_per_rtHz"]} for r, v in rf.items()} or None
     rep["findings"] = compliance.label(claims.humps(d, d.noise, ripple_fit=rf), getattr(d, "compliance", None))
     rep["compliance"] = getattr(d, "compliance", None)
