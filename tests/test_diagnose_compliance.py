@@ -8,7 +8,6 @@ the load cell about as large as the sensor noise. The same case without the
 shaft is the control: its truth runs the speed loops with another feed-forward,
 which moves the rigid line's own mode, and a shaft must not be claimed for it."""
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -50,13 +49,14 @@ def test_label_says_which_hump_a_claimed_shaft_reproduces():
     assert out[0]["rigid_form"] == "feedforward reference"
 
 
-def _case(tmp_path, with_shaft):
+def _case(tmp_path, with_shaft, ripple_x=RIPPLE_X):
     doc = B.derive_line()
     facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
     case = next(c for c in BI.draw_cases(21, seed=0, layout_doc=doc, facts=facts) if c.id == "c21")
     shaft = next(e for e in case.effects if e.kind == "compliance")
-    case.model.ripple[shaft.element] *= RIPPLE_X
-    case.model.visibility = {}   # the level is this test's, not a drawn one
+    if ripple_x is not None:
+        case.model.ripple[shaft.element] *= ripple_x
+        case.model.visibility = {}   # the level is this test's, not a drawn one
     if not with_shaft:
         case.effects = []
     truth = BI.make_case(case, tmp_path / "case", doc)
@@ -90,3 +90,27 @@ def test_no_shaft_is_claimed_for_a_rigid_line_whose_mode_the_model_places_wrong(
     # the hump is there and was screened; a rigid form fits it at least as well as any shaft
     assert recs and recs[0]["claimed"] is None and recs[0]["rigid"]["form"] != "as modelled"
     assert not math.isnan(recs[0]["rigid"]["misfit"])
+
+
+def test_a_shaft_that_makes_no_hump_is_found_in_the_band_the_rigid_fit_misses(tmp_path):
+    # the benchmark's own draw for c21: deflection 17 (the energy detector's bound is 5),
+    # no hump stands out; the rigid line's ripple fit misses most at 2-8 Hz
+    shaft, truth, rep = _case(tmp_path, True, ripple_x=None)
+    det = truth["effects"][0]["detectable"]
+    assert det["deflection_where"] < 50 and det["detectable"]
+    recs = rep["compliance"]
+    assert recs[0]["hump"]["kind"] == "spectral misfit"
+    found = [e for e in rep["effects"] if e["kind"] == "compliance"]
+    assert [e["element"] for e in found] == ["sw_leader"]
+    assert found[0]["fundamental_hz"] == pytest.approx(shaft.drive["torsional_hz"], rel=0.2)
+
+
+def test_the_misfit_floor_counts_the_fine_views_degrees_of_freedom():
+    from types import SimpleNamespace
+    # 60 s at 250 Hz: 4 s segments (1000 samples) at half overlap, 29 of them; 3 bins each
+    c = SimpleNamespace(mask=np.ones(15000, bool), fs=250.0)
+    assert compliance.misfit_floor(c) == pytest.approx(2.0 / (2 * 3 * 0.9 * 29), rel=1e-12)
+    # a log-ratio of a chi-square with nu degrees of freedom to its mean has variance ~ 2/nu
+    nu = 2 * 3 * 0.9 * 29
+    x = np.random.default_rng(1).chisquare(nu, 200000) / nu
+    assert np.mean(np.log(x) ** 2) == pytest.approx(compliance.misfit_floor(c), rel=0.05)
