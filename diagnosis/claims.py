@@ -296,7 +296,7 @@ def humps(d, noise, min_share=0.05, min_width_hz=1.0, ratio=4.0, max_top3=0.7, r
                 i0 = a + int(np.argmax(ps[a:b]))
                 w = int(round(1.0 / df))
                 lo_i, hi_i = max(a, i0 - w), min(b, i0 + w + 1)
-                pm = np.convolve(p, np.ones(3) / 3.0, mode="same")
+                pm = ripple.fine(p, f)
                 fc = float(f[lo_i + int(np.argmax(pm[lo_i:hi_i]))])
                 h = {"kind": "unexplained resonance", "run": c.name, "sensor": s,
                      "frequency_hz": fc, "band_hz": [float(f[a]), float(f[b - 1])],

@@ -47,10 +47,7 @@ CHECK_TRIES = 3     # shafts of the best element tried against that, best spectr
 MAX_HUMPS = 1       # humps tried, strongest first (each costs a grid of simulations per drive and form)
 
 
-def fine(p, f):
-    """A 3-bin mean of the Welch PSD (0.75 Hz): a mode with a damping ratio of a few per
-    cent keeps its peak, which the 2 Hz running median of :func:`ripple.smooth` flattens."""
-    return np.convolve(p, np.ones(3) / 3.0, mode="same")
+fine = ripple.fine
 
 
 def band_of(hump, fs):
@@ -120,17 +117,16 @@ def worst_band(d, noise):
     sims = d.steps[-1]["sims"]
     G = ripple.responses(_only(d, c), d.refined_doc, sims, view=fine)
     floor = misfit_floor(c)
+    resid = {s: ripple.welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs) for s in c.sensors}
     best = None
     for fc in BAND_CENTRES_HZ:
         if 2.0 * fc > 0.45 * c.fs:
             continue
         lo, hi = 0.5 * fc, 2.0 * fc
-        f, _ = ripple.welch(c.meas[c.sensors[0]][c.mask], c.fs)
-        m = (f >= lo) & (f <= hi)
 
-        def excess(s, m=m):
-            _, p = ripple.welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs)
-            return float(np.mean(p[m])) / noise[c.name][s]["psd_N2_per_hz"]
+        def excess(s, lo=lo, hi=hi):  # the band's residual over the sensor's white floor
+            f, p = resid[s]
+            return float(np.mean(p[(f >= lo) & (f <= hi)])) / noise[c.name][s]["psd_N2_per_hz"]
         h = {"kind": "spectral misfit", "run": c.name, "sensor": max(c.sensors, key=excess), "frequency_hz": fc,
              "band_hz": [lo, hi], "share_of_residual": None, "ripple_explains": None}
         got = spectral_fit(d, noise, d.refined_doc, sims, h, G=G)
