@@ -47,9 +47,6 @@ CHECK_TRIES = 3     # shafts of the best element tried against that, best spectr
 MAX_HUMPS = 1       # humps tried, strongest first (each costs a grid of simulations per drive and form)
 
 
-fine = ripple.fine
-
-
 def band_of(hump, fs):
     """Where a shaft's mode near the hump's top is compared: half to twice its frequency."""
     fh = hump["frequency_hz"]
@@ -66,7 +63,7 @@ def spectral_fit(d, noise, doc, sims, hump, G=None):
     if c is None:
         return None
     if G is None:
-        G = ripple.responses(_only(d, c), doc, sims, view=fine)
+        G = ripple.responses(_only(d, c), doc, sims, view=ripple.fine)
     G, freqs = G
     if c.name not in G:
         return None
@@ -76,7 +73,7 @@ def spectral_fit(d, noise, doc, sims, hump, G=None):
     P, S0 = {}, {}
     for s in c.sensors:
         _, p = ripple.welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs)
-        P[s] = fine(p, f)
+        P[s] = ripple.fine(p, f)
         S0[s] = noise[c.name][s]["psd_N2_per_hz"]
     Gx = dict(G[c.name])
     ff = np.maximum(f, f[1])
@@ -115,7 +112,7 @@ def worst_band(d, noise):
         return None
     c = max(fit, key=lambda c: np.sum(c.mask) / c.fs)
     sims = d.steps[-1]["sims"]
-    G = ripple.responses(_only(d, c), d.refined_doc, sims, view=fine)
+    G = ripple.responses(_only(d, c), d.refined_doc, sims, view=ripple.fine)
     floor = misfit_floor(c)
     resid = {s: ripple.welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs) for s in c.sensors}
     best = None
@@ -134,6 +131,7 @@ def worst_band(d, noise):
             continue
         h["misfit_ratio"] = got[0] / floor
         h["ripple_explains"] = got[1]
+        h["rigid_fit"] = got   # the rigid line's fit of this band: screen() starts from it
         if h["misfit_ratio"] > FLOOR_X and (best is None or h["misfit_ratio"] > best["misfit_ratio"]):
             best = h
     if best is not None:
@@ -291,7 +289,7 @@ def screen(d):
         if not specs:
             break
         c = next(c for c in d.ctx if c.name == hump["run"])
-        base = spectral_fit(d, noise, d.refined_doc, d.steps[-1]["sims"], hump)
+        base = hump.get("rigid_fit") or spectral_fit(d, noise, d.refined_doc, d.steps[-1]["sims"], hump)
         if base is None:
             continue
         tried, pts = _scan(d, noise, hump, c, specs)

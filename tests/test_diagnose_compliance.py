@@ -29,8 +29,8 @@ def test_the_fine_view_keeps_a_lightly_damped_peak_the_hump_view_flattens():
     i = int(np.argmin(abs(f - f0)))
     # the top bin is 1 + 27.8 and its neighbours about 1 + 7.6: a 3-bin mean of about 15,
     # while the 2 Hz running median takes the 5th of 9 bins, the skirt at about 3
-    assert compliance.fine(p, f)[i] == pytest.approx(np.mean(p[i - 1:i + 2]), rel=1e-12)
-    assert compliance.fine(p, f)[i] > 12.0 and ripple.smooth(p, f)[i] < 4.0
+    assert ripple.fine(p, f)[i] == pytest.approx(np.mean(p[i - 1:i + 2]), rel=1e-12)
+    assert ripple.fine(p, f)[i] > 12.0 and ripple.smooth(p, f)[i] < 4.0
 
 
 def test_label_says_which_hump_a_claimed_shaft_reproduces():
