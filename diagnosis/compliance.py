@@ -363,6 +363,6 @@ def label(findings, records):
             elif not rec.get("claimed") and rec["rigid"]["form"] != "as modelled" and hp["run"] == h["run"] \
                     and abs(hp["frequency_hz"] - h["frequency_hz"]) <= 0.15 * hp["frequency_hz"]:
                 h["rigid_form"] = rec["rigid"]["form"]
-                h["text"] += (f"; the rigid line in form '{rec['rigid']['form']}' fits its spectrum better than "
-                              f"any shaft (the model may place the line's own mode wrong)")
+                h["text"] += (f"; the rigid line in form '{rec['rigid']['form']}' fits its spectrum as well "
+                              f"as a shaft does (the model may place the line's own mode wrong)")
     return findings
