@@ -406,13 +406,13 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                               "# the nominal line plus the hidden effects\n")
     t_gen = time.perf_counter()
     runs_out = []
-    drives = [i for i, e in enumerate(case.effects) if e.kind in DRIVE_KINDS]
-    # the truth without each drive effect (detectability: :func:`drive_visibility`)
+    hidden = range(len(case.effects))
+    # the truth without each hidden effect (detectability: :func:`effect_record`)
     without = {i: write_yaml(truth_dir / f"without_{i}.yaml", {
         "base": os.path.relpath(line, truth_dir),
         "set": truth_set(replace(case, effects=[e for j, e in enumerate(case.effects) if j != i]),
-                         line_doc)}) for i in drives}
-    seen = {i: [] for i in drives}
+                         line_doc)}) for i in hidden}
+    seen = {i: [] for i in hidden}
     for run in case.runs:
         exp = run_conditions(run)
         system = load_system(truth_layout, _overrides(exp))
@@ -431,12 +431,12 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
                 cols[f"{lc} [lbf]"] = (y + n) / LBF
             else:
                 cols[f"{lc} [N]"] = y + n
-        for i in ([] if run.holdout else drives):
+        for i in ([] if run.holdout else hidden):
             s0 = load_system(without[i], _overrides(exp))
             s0.experiment.output_interval = 1.0 / FS
             res0 = simulate(s0, fmu_paths=fmu_paths, progress=False)
             if res0.ok:
-                seen[i].append(drive_visibility(case.effects[i], run, t, res, res0, clean, noise))
+                seen[i].append(effect_record(case.effects[i], run, t, res, res0, clean, noise))
         master = facts["_master"]
         if "line_speed" in run.extra:
             cols["line_speed [ft/min]"] = np.asarray(res[f"{master}.v"]) / FPM
@@ -477,8 +477,8 @@ def make_case(case, folder, line_doc, fmu_paths=None, engine="fast"):
     return truth
 
 
-def drive_visibility(effect, run, t, res, res0, clean, noise):
-    """One fit run's record of how visible a drive effect is at each load cell:
+def effect_record(effect, run, t, res, res0, clean, noise):
+    """One fit run's record of how visible a hidden effect is at each load cell:
     ``res`` / ``res0`` the truth with / without it, ``clean`` / ``noise`` the
     tensions and the noise added (see
     :func:`diagnosis.benchmark_independent.effect_visibility`)."""
@@ -705,7 +705,7 @@ def summarize(results):
         walls.append(res.get("wall_s") or 0.0)
         for t in tr["effects"]:
             if t["kind"] in DRIVE_KINDS:
-                det = drive_detectable(tr, t)
+                det = effect_detectable(tr, t)
                 dk = detect[t["kind"]]
                 if det is None:
                     dk["unknown"] += 1
@@ -768,7 +768,7 @@ def summarize(results):
         "dominant_amplitude_rel_error": _stats(amp_err),
         "dominant_phase_error_rad": _stats(ph_err),
         "noise_only": noise_only,
-        # hidden drive effects that can be seen at all (:func:`drive_detectable`), and how many were found
+        # hidden drive effects that can be seen at all (:func:`effect_detectable`), and how many were found
         "backlash_with_torque_reversal": detect["backlash"],
         "drive_detectable": detect,
         "gap": {
@@ -799,11 +799,11 @@ def torque_reverses(truth, element, eps=0.01):
     return seen
 
 
-def drive_detectable(truth, effect):
-    """Whether a hidden drive effect can be seen in the fit runs at all (None:
-    not known). Measured where the case records it (``effect["detectable"]``:
-    the truth simulated with and without the effect against the measurement
-    error, :func:`diagnosis.benchmark_independent.drive_detectability`); else a
+def effect_detectable(truth, effect):
+    """Whether a hidden effect can be seen in the fit runs at all (None: not
+    known). Measured where the case records it (``effect["detectable"]``: the
+    truth simulated with and without the effect against what else the data
+    hold, :func:`diagnosis.benchmark_independent.detectability`); else a
     backlash only where its drive torque reverses (:func:`torque_reverses`)."""
     d = effect.get("detectable")
     if isinstance(d, dict) and "detectable" in d:

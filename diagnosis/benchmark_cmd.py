@@ -171,7 +171,7 @@ def rescore(out, results_path=None, family="own"):
         from webline.diagnosis import benchmark_independent as BI
         for p in folders:
             tr = json.loads((p / "truth" / "truth.json").read_text())
-            if any(e["kind"] in B.DRIVE_KINDS and "detectable" not in e for e in tr["effects"]) and tr.get("runs"):
+            if any("detectable" not in e for e in tr["effects"]) and tr.get("runs"):
                 try:
                     BI.add_detectability(p)
                 except Exception as exc:  # noqa: BLE001 - recorded as not known, the rescore goes on

@@ -45,7 +45,7 @@ measurement error the generator injected (known exactly); the dominant
 harmonic's amplitude within 20 % or flagged not identifiable; periodic sources
 invented on noise-only records. Beside the headline (all effects), the recall
 of the hidden drive effects over all of them and over the *detectable* ones
-only: :func:`drive_detectability` simulates the truth with and without each
+only: :func:`detectability` simulates the truth with and without each
 drive effect and compares the difference with the measurement error the case
 injected (regenerated from its seed), as a whitened matched-filter SNR overall
 and where the effect acts (compliance: the band around its torsional mode;
@@ -497,7 +497,7 @@ def _make_once(case, folder, line_doc, *, simulate=None):
              "runs": runs_out, "generation_s": time.perf_counter() - t_gen,
              "blind_folder": str(blind), "truth_layout": str(truth_layout)}
     # each hidden drive effect: can the data show it at all? (the truth with and without it)
-    for i, rec in drive_detectability(truth, folder, simulate=simulate).items():
+    for i, rec in detectability(truth, folder, simulate=simulate).items():
         truth["effects"][i]["detectable"] = rec
     (truth_dir / "truth.json").write_text(json.dumps(truth, indent=1))
     return truth
@@ -603,9 +603,13 @@ def case_targets(truth, report, score=None):
         amp.append({"element": m["element"], "rel_error": err, "flagged_not_identifiable": flagged,
                     "ok": bool(flagged or (err is not None and err <= AMP_TOL))})
     noise_only = not truth["effects"]
-    drive = [{"element": t["element"], "kind": t["kind"], "detectable": B.drive_detectable(truth, t),
+    # every hidden effect: could the data show it, and was it found (a periodic one also as an
+    # element it cannot be told from, as the scorer's match allows)
+    found = [{"element": t["element"], "kind": t["kind"], "detectable": B.effect_detectable(truth, t),
+              "detect_value": (t.get("detectable") or {}).get("detect_value"),
               "found": any(m["kind"] == t["kind"] and m["element"] == t["element"] for m in kept)}
-             for t in truth["effects"] if t["kind"] in B.DRIVE_KINDS]
+             for t in truth["effects"]]
+    drive = [f for f in found if f["kind"] in B.DRIVE_KINDS]
     return {
         "true": score["n_true"], "reported": len(reported), "matched": len(kept), "other_reports": other,
         "ambiguous": sum(m["mode"] == "ambiguous" for m in kept),
@@ -620,6 +624,7 @@ def case_targets(truth, report, score=None):
         "invented_periodic": (sum(e.get("kind") in B.PERIODIC for e in reported) if noise_only else 0),
         "invented_any": len(everything) if noise_only else 0,
         "drive": drive,
+        "effects": found,
     }
 
 
@@ -642,6 +647,7 @@ def target_scores(results):
     noise = {"cases": 0, "records": 0, "ramped_records": 0, "invented_periodic": 0, "invented_any": 0}
     diagnosed = 0
     drive = {"true": 0, "matched": 0, "detectable": 0, "matched_detectable": 0, "unknown": 0}
+    every = dict(drive)
     for res in results:
         tr, rep = res["truth"], res.get("report")
         if rep is None:
@@ -667,14 +673,15 @@ def target_scores(results):
                 if v and v["closed_share"] is not None:
                     lst.append(v["closed_share"])
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
-        for dv in c["drive"]:
-            drive["true"] += 1
-            drive["matched"] += dv["found"]
-            if dv["detectable"] is None:
-                drive["unknown"] += 1
-            elif dv["detectable"]:
-                drive["detectable"] += 1
-                drive["matched_detectable"] += dv["found"]
+        for dv in c["effects"]:
+            for d in (every, drive) if dv["kind"] in B.DRIVE_KINDS else (every,):
+                d["true"] += 1
+                d["matched"] += dv["found"]
+                if dv["detectable"] is None:
+                    d["unknown"] += 1
+                elif dv["detectable"]:
+                    d["detectable"] += 1
+                    d["matched_detectable"] += dv["found"]
         if c["noise_only"]:
             noise["cases"] += 1
             noise["records"] += len(tr["runs"])
@@ -695,9 +702,12 @@ def target_scores(results):
                       "rel_errors": B._stats([a["rel_error"] for a in amp])},
         "noise_only": noise, "targets": TARGETS,
         # beside the headline (all effects): drive-effect recall over all hidden drive effects
-        # and over those the data can show at all (B.drive_detectable; unknown ones left out)
+        # and over those the data can show at all (B.effect_detectable; unknown ones left out)
         "drive": {**drive, "recall": B._ratio(drive["matched"], drive["true"]),
                   "recall_detectable": B._ratio(drive["matched_detectable"], drive["detectable"])},
+        # the same over every hidden effect: what a method could reach on these data
+        "detectable": {**every, "recall": B._ratio(every["matched"], every["true"]),
+                       "recall_detectable": B._ratio(every["matched_detectable"], every["detectable"])},
     }
     s["verdict"] = _verdicts(s)
     return s
@@ -716,6 +726,7 @@ def _verdicts(s):
         "amplitude": "n/a" if not a["n"] else "pass" if a["ok"] == a["n"] else "fail",
         "no_invented_periodic": "n/a" if not no["cases"] else "pass" if not no["invented_periodic"] else "fail",
         "drive_recall": "n/a" if not (s.get("drive") or {}).get("true") else "no target",
+        "detectable_recall": "n/a" if not (s.get("detectable") or {}).get("detectable") else "no target",
     }
 
 
@@ -748,6 +759,8 @@ def target_rows(s):
         ("dominant run-out amplitude within 20 % or flagged",
          f"{a['ok']}/{a['n']} (median error {B._pct2(a['rel_errors']['median'])}, {a['flagged']} flagged)",
          "all", "amplitude"),
+        ("recall over the hidden effects the data can show (each measured: truth with and without it)",
+         _drive_cell(s.get("detectable") or {}), "-", "detectable_recall"),
         ("drive effects (backlash, compliance): recall over all hidden / over the detectable only",
          _drive_cell(s.get("drive") or {}), "-", "drive_recall"),
         ("periodic sources invented on noise-only records",
@@ -758,6 +771,7 @@ def target_rows(s):
 
 
 def _drive_cell(d):
+    """'all: recall (matched/true); detectable only: recall (matched/detectable)'."""
     if not d.get("true"):
         return "-"
     unk = f", {d['unknown']} not known" if d.get("unknown") else ""
@@ -901,8 +915,15 @@ def effect_visibility(kind, t, with_T, without_T, noise_T, fs, *, torsional_hz=N
         out.update(where=f"{episodes} visits of the drive torque to zero (+-{REVERSAL_WINDOW_S:g} s), "
                          f"{100 * float(mask.mean()):.0f} % of the record", snr_where=snr,
                    delta_rms_where_N=d, noise_rms_where_N=nn, reversals=episodes, window_share=float(mask.mean()))
+    elif kind in B.PERIODIC:
+        # a run-out's waveform is locked to its element's angle, which a diagnosis knows:
+        # the matched filter over every frequency is the bound; ``noise_T`` carries what
+        # the data hold beside the effect and no model reproduces (the error and the
+        # drives' ripple-rung response)
+        out.update(where="the element's harmonics", snr_where=snr_all, delta_rms_where_N=out["delta_rms_N"],
+                   noise_rms_where_N=out["noise_rms_N"])
     else:
-        raise ValueError(f"not a drive effect kind: {kind!r}")
+        raise ValueError(f"not a hidden effect kind: {kind!r}")
     return out
 
 
@@ -931,8 +952,9 @@ def _combine(per):
 
 
 def _layout_without(truth, line_doc, line_path, index):
-    """Set block of the truth layout without its effect ``index`` (a drive effect):
-    the drive removed, the element's inertia back at its (parameter-drawn) total."""
+    """Set block of the truth layout without its effect ``index``: a run-out's
+    harmonics removed; a drive removed, the element's inertia back at its
+    (parameter-drawn) total."""
     from types import SimpleNamespace
     e = truth["effects"][index]
     eff = B.Effect(**{k: e[k] for k in ("kind", "element", "C_m", "psi_rad", "drive", "inertia_shift") if k in e})
@@ -947,7 +969,7 @@ def _layout_without(truth, line_doc, line_path, index):
     return {"base": str(Path(line_path).resolve()), "set": s}
 
 
-def drive_detectability(truth, folder, *, simulate=None):
+def detectability(truth, folder, *, simulate=None):
     """For each hidden drive effect of a case: simulate the truth with and without
     it (the truth engine, :func:`simulate_truth`) in every fit run, regenerate the
     measurement error the case injected (same seed, :func:`measure`) and compare
@@ -969,8 +991,7 @@ def drive_detectability(truth, folder, *, simulate=None):
     fields = set(IRunSpec.__dataclass_fields__)
     with tempfile.TemporaryDirectory() as tmp:
         for i, e in enumerate(truth["effects"]):
-            if e["kind"] not in B.DRIVE_KINDS:
-                continue
+            periodic = e["kind"] in B.PERIODIC
             wo = B.write_yaml(Path(tmp) / f"without{i}.yaml", _layout_without(truth, line_doc, line_path, i))
             per, runs = [], []
             for r in truth["runs"]:
@@ -985,6 +1006,12 @@ def drive_detectability(truth, folder, *, simulate=None):
                 # the same without the drives' torque ripple: what the effect shows deterministically
                 quiet = (simulate(load_system(truth_layout, ov0), t), simulate(load_system(wo, ov0), t)) \
                     if r.get("ripple_set") else None
+                if periodic and quiet is not None:
+                    # the ripple-rung response is noise to a run-out's lines, as the error is
+                    res, res0, ripple_part = quiet[0], quiet[1], res
+                    quiet = None
+                else:
+                    ripple_part = None
                 tt = np.asarray(res.time, float)
                 settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)
                 rng = np.random.default_rng(run.seed)
@@ -993,7 +1020,8 @@ def drive_detectability(truth, folder, *, simulate=None):
                 rec = {"run": r["name"], "sensors": {}}
                 for lc in sorted(facts["_sensors"]):
                     y = np.asarray(res[f"{lc}.T"], float)
-                    m, _ = measure(tt, y, run, rng)  # the same draws as the case's data
+                    m, _ = measure(tt, y if ripple_part is None else np.asarray(ripple_part[f"{lc}.T"], float),
+                                   run, rng)  # the same draws as the case's data
                     v = effect_visibility(e["kind"], tt[settle], y[settle], np.asarray(res0[f"{lc}.T"], float)[settle],
                                           (m - y)[settle], run.fs_hz, tau=tau,
                                           torsional_hz=(e.get("drive") or {}).get("torsional_hz"))
@@ -1011,11 +1039,11 @@ def drive_detectability(truth, folder, *, simulate=None):
 
 
 def add_detectability(folder, *, simulate=None):
-    """Record :func:`drive_detectability` in the case's truth/truth.json (each
+    """Record :func:`detectability` in the case's truth/truth.json (each
     drive effect's ``detectable``); returns the updated truth record."""
     p = Path(folder) / "truth" / "truth.json"
     truth = json.loads(p.read_text())
-    for i, rec in drive_detectability(truth, folder, simulate=simulate).items():
+    for i, rec in detectability(truth, folder, simulate=simulate).items():
         truth["effects"][i]["detectable"] = rec
     p.write_text(json.dumps(truth, indent=1))
     return truth

@@ -287,7 +287,7 @@ def test_target_scores_on_hand_made_reports():
     assert s2["amplitude"]["ok"] == 0 and s2["verdict"]["amplitude"] == "fail"
     assert s2["verdict"]["precision"] == "pass" and s2["verdict"]["no_worse_nrmse"] == "pass"
     md = BI.side_by_side({"own": s2, "independent": s})
-    assert md.count("\n") == 10 and "| own | independent |" in md  # 2 header lines, 8 measures
+    assert md.count("\n") == 11 and "| own | independent |" in md  # 2 header lines, 9 measures
 
 
 def test_command_rescores_both_families_side_by_side(tmp_path):
