@@ -743,7 +743,7 @@ class Compiled:
         from webline.orchestrator.reference import ReferenceSystem
         t = _time.perf_counter()
         self.system = system
-        self.ref = ReferenceSystem(system)
+        self.ref = ReferenceSystem(system, reuse=True)  # read only: slaves of equal components are shared
         b = _Builder(self.ref)
         self.source = b.source()
         self.p = np.array(b.p, dtype=float)

@@ -60,10 +60,11 @@ def fmu_classes():
     return _CLASSES
 
 
-def instantiate(component, start_time=0.0, stop_time=None):
+def instantiate(component, start_time=0.0, stop_time=None, classes=None):
     """FMU slave object of ``component`` with its parameters and input starts set and
-    initialised (its ``model`` attribute built by ``make_model()``), as an FMU host would."""
-    classes = fmu_classes()
+    initialised (its ``model`` attribute built by ``make_model()``), as an FMU host would.
+    ``classes``: :func:`fmu_classes`, if the caller already has them."""
+    classes = classes or fmu_classes()
     if component.model not in classes:
         raise KeyError(f"component {component.name!r}: no FMU script for model {component.model!r} "
                        f"(known: {', '.join(sorted(classes))})")
@@ -88,6 +89,28 @@ def instantiate(component, start_time=0.0, stop_time=None):
     return slave
 
 
+REUSE_MAX = 2048  # instantiated slaves kept for reuse (a few kB each)
+_REUSE = {}
+
+
+def _reused(component, start_time, stop_time, classes):
+    """:func:`instantiate`, or the slave made before for an equal component (model, name,
+    parameters, input starts, times). Only for readers that never step a slave or call its
+    model (the fast engine generates code from them): a diagnosis simulates hundreds of
+    variants of one line that differ in one or two components, and registering an FMU's
+    variables is most of what setting up a variant costs."""
+    key = (component.model, component.name, tuple(sorted(component.parameters.items())),
+           tuple(sorted(component.inputs.items())), float(start_time),
+           None if stop_time is None else float(stop_time))
+    slave = _REUSE.get(key)
+    if slave is None:
+        slave = instantiate(component, start_time, stop_time, classes)
+        if len(_REUSE) >= REUSE_MAX:
+            _REUSE.pop(next(iter(_REUSE)))
+        _REUSE[key] = slave
+    return slave
+
+
 # ---- the assembled ODE -----------------------------------------------------------------
 class ReferenceSystem:
     """A System compiled into one ODE ``dx/dt = rhs(t, x)`` over all models' states.
@@ -97,13 +120,15 @@ class ReferenceSystem:
     ``columns`` (``<component>.<output>`` for every output, in ``outputs()`` order).
     """
 
-    def __init__(self, system):
+    def __init__(self, system, reuse=False):
         problems = system.check()
         if problems:
             raise ValueError("system is not well formed:\n  " + "\n  ".join(problems))
         exp = system.experiment
         self.system = system
-        self.slaves = [instantiate(c, exp.start, exp.stop) for c in system.components]
+        classes = fmu_classes()
+        make = _reused if reuse else instantiate
+        self.slaves = [make(c, exp.start, exp.stop, classes) for c in system.components]
         self.names = [c.name for c in system.components]
         self.models = [s.model for s in self.slaves]
         index = {n: i for i, n in enumerate(self.names)}
