@@ -93,3 +93,28 @@ def test_parsimony_rule_on_numbers():
     assert parsimony_rule({"s": f}, {"s": w}, {"s": p})[1] is not None
     p = (w ** 2 - 0.85 * (w ** 2 - f ** 2)) ** 0.5
     assert parsimony_rule({"s": f}, {"s": w}, {"s": p})[1] is None
+
+
+def test_parsimony_weighs_a_secondary_source_against_the_noise_floor():
+    from webline.diagnosis.structure import CLOSES, parsimony_rule
+    # independent c07 (phantom roller9 beside an eccentric roller19; the truth feeds forward
+    # nothing): lc9 recovers 97 %, lc19 only 78 % - but roller9 takes lc19 from 0.0836 to
+    # 0.0728 where its noise allows 0.0514: 39 % of the gap, a transfer error absorbed
+    full, wo, form = {"lc9.T": 0.1748, "lc19.T": 0.0728}, {"lc9.T": 1.0007, "lc19.T": 0.1135}, \
+        {"lc9.T": 0.2348, "lc19.T": 0.0836}
+    floor = {"lc9.T": 0.1089, "lc19.T": 0.0514}
+    rows, why = parsimony_rule(full, wo, form)
+    assert why and "lc19.T" in why and rows["lc19.T"]["recovered"] < 0.80
+    rows, why = parsimony_rule(full, wo, form, floor=floor)
+    assert why is None
+    c = rows["lc19.T"]["secondary_closes"]
+    assert c == pytest.approx((0.0836 ** 2 - 0.0728 ** 2) / (0.0836 ** 2 - 0.0514 ** 2)) and c < CLOSES
+    # independent c05 (two real idlers): without idler_u1 lc9 stays at 0.587 (floor 0.0835), with it
+    # 0.195 - 91 % of the gap closed - and lc19 88 %: kept
+    rows, why = parsimony_rule({"lc9.T": 0.1953, "lc19.T": 0.1177}, {"lc9.T": 1.0032, "lc19.T": 0.1553},
+                               {"lc9.T": 0.5873, "lc19.T": 0.2816}, floor={"lc9.T": 0.0835, "lc19.T": 0.0692})
+    assert why and rows["lc9.T"]["secondary_closes"] > 0.9
+    # a full set at or below the floor (the estimate's scatter): the secondary took the sensor to
+    # its noise, never dropped on this ground
+    rows, why = parsimony_rule({"s": 0.10}, {"s": 0.5}, {"s": 0.5}, floor={"s": 0.11})
+    assert why and rows["s"]["secondary_closes"] > 1.0
