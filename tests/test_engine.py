@@ -12,7 +12,6 @@ bound is the accuracy table's 0.5 % (the co-simulation's own error at its
 default macro step).
 """
 import copy
-import math
 from pathlib import Path
 
 import numpy as np
