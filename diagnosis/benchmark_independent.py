@@ -44,17 +44,19 @@ most affected sensor, in sample and held out, the achievable NRMSE being the
 measurement error the generator injected (known exactly); the dominant
 harmonic's amplitude within 20 % or flagged not identifiable; periodic sources
 invented on noise-only records. Beside the headline (all effects), the recall
-of the hidden drive effects over all of them and over the *detectable* ones
-only: :func:`detectability` simulates the truth with and without each
-drive effect and compares the difference with the measurement error the case
+over the *detectable* ones only, of every hidden effect and of the drive
+effects: :func:`detectability` simulates the truth with and without each
+hidden effect and compares the difference with the measurement error the case
 injected (regenerated from its seed), as a whitened matched-filter SNR overall
-and where the effect acts (compliance: the band around its torsional mode;
-backlash: around the times its drive torque is at zero); detectable = that SNR,
+and where the effect acts (a run-out: its lines, all frequencies; compliance:
+the band around its torsional mode; backlash: around the times its drive
+torque is at zero); detectable = that SNR,
 combined over load cells and fit runs, >= DETECT_SNR. Where the drives carry a
 torque ripple, the SNR counted is what a diagnosis could reach without the
 ripple's sequence: the matched filter on the effect's deterministic part (truth
 with and without it, both without ripple) or the energy detector's deflection
-on the ripple-rung part's spectrum, whichever is larger.
+on the ripple-rung part's spectrum, whichever is larger; for a run-out the
+ripple-rung response is part of the noise.
 """
 import copy
 import json
@@ -496,7 +498,7 @@ def _make_once(case, folder, line_doc, *, simulate=None):
              "model": asdict(case.model), "forms_applied": frec, "set": tset,
              "runs": runs_out, "generation_s": time.perf_counter() - t_gen,
              "blind_folder": str(blind), "truth_layout": str(truth_layout)}
-    # each hidden drive effect: can the data show it at all? (the truth with and without it)
+    # each hidden effect: can the data show it at all? (the truth with and without it)
     for i, rec in detectability(truth, folder, simulate=simulate).items():
         truth["effects"][i]["detectable"] = rec
     (truth_dir / "truth.json").write_text(json.dumps(truth, indent=1))
@@ -760,9 +762,9 @@ def target_rows(s):
          f"{a['ok']}/{a['n']} (median error {B._pct2(a['rel_errors']['median'])}, {a['flagged']} flagged)",
          "all", "amplitude"),
         ("recall over the hidden effects the data can show (each measured: truth with and without it)",
-         _drive_cell(s.get("detectable") or {}), "-", "detectable_recall"),
+         _recall_cell(s.get("detectable") or {}), "-", "detectable_recall"),
         ("drive effects (backlash, compliance): recall over all hidden / over the detectable only",
-         _drive_cell(s.get("drive") or {}), "-", "drive_recall"),
+         _recall_cell(s.get("drive") or {}), "-", "drive_recall"),
         ("periodic sources invented on noise-only records",
          f"{no['invented_periodic']} in {no['records']} records ({no['ramped_records']} ramped) of {no['cases']} cases"
          + (f" ({no['invented_any']} findings of any kind)" if no["invented_any"] else ""),
@@ -770,7 +772,7 @@ def target_rows(s):
     ]
 
 
-def _drive_cell(d):
+def _recall_cell(d):
     """'all: recall (matched/true); detectable only: recall (matched/detectable)'."""
     if not d.get("true"):
         return "-"
@@ -970,7 +972,7 @@ def _layout_without(truth, line_doc, line_path, index):
 
 
 def detectability(truth, folder, *, simulate=None):
-    """For each hidden drive effect of a case: simulate the truth with and without
+    """For each hidden effect of a case: simulate the truth with and without
     it (the truth engine, :func:`simulate_truth`) in every fit run, regenerate the
     measurement error the case injected (same seed, :func:`measure`) and compare
     (:func:`effect_visibility`). Returns {effect index: record}; the record's
@@ -1040,7 +1042,7 @@ def detectability(truth, folder, *, simulate=None):
 
 def add_detectability(folder, *, simulate=None):
     """Record :func:`detectability` in the case's truth/truth.json (each
-    drive effect's ``detectable``); returns the updated truth record."""
+    hidden effect's ``detectable``); returns the updated truth record."""
     p = Path(folder) / "truth" / "truth.json"
     truth = json.loads(p.read_text())
     for i, rec in detectability(truth, folder, simulate=simulate).items():

@@ -694,9 +694,7 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     if without is None or not cands:
         return full
     tried = []
-    fit = d.fit_ctx()
-    noise = getattr(d, "noise", None) or claims.sensor_noise(d)
-    floor = {s_: claims.achievable_for(d, noise, fit, s_) for s_ in full["nrmse"]}
+    floor = {s_: claims.achievable_for(d, d.noise, d.fit_ctx(), s_) for s_ in full["nrmse"]}
     # judged per sensor on the whole record: an order-by-order test (what the
     # secondary sources explained per harmonic) was tried and rejected the phantoms
     # of benchmark c01/c07 too, on re-estimation differences of the primary
