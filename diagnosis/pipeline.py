@@ -750,8 +750,12 @@ class Diagnosis:
                 e_ord = np.sum(np.abs(M) ** 2, axis=0)
                 keep = np.array([d["z_order"].get(j, 0.0) > 9.0 * max(1, len(d["fits"]))
                                  or e_ord[j - 1] > 0.02 * np.sum(e_ord) for j in range(1, len(X) + 1)])
+                # ... but the report says what they were: "not in the model" is not "zero"
+                below = {j: (complex(X[j - 1]), float(d["z_order"].get(j, 0.0)))
+                         for j in range(1, len(X) + 1) if not keep[j - 1] and abs(X[j - 1]) > 0}
                 X = np.where(keep, X, 0.0)
-                ranked.append({"score": d, "cand": k, "G": G, "M": M, "W": W, "X": X, "misfit": misfit})
+                ranked.append({"score": d, "cand": k, "G": G, "M": M, "W": W, "X": X, "misfit": misfit,
+                               "below_noise": below})
             if not ranked:
                 continue
             # best pattern fit first; ties (one sensor: every element fits exactly) go to

@@ -150,7 +150,7 @@ def _effects(d):
             "fundamental_hz": float(np.mean(fund_fit)) if fund_fit else None,
             "fundamental_by_run_hz": fund,
             "speed_scale_by_run": {c.name: c.kappa.get(k.key, 0.0) for c in fit},
-            "harmonics": [_harmonic_entry(b, X, j) for j in range(len(X)) if abs(X[j]) > 0],
+            "harmonics": _harmonics(b, X),
             "harmonics_unit": {"amplitude": "m", "phase": "rad"},
             "explained_share": b.get("share", score["share"]),
             "explained_share_of_residual": (b.get("share", score["share"]) * d.total_periodic / d.total_resid
@@ -190,6 +190,22 @@ def _harmonic_entry(b, X, j):
     if j + 1 in (b.get("transfer_dropped") or ()):
         out["in_refined_layout"] = False   # its held-out prediction does not carry (report.transfer)
     return out
+
+
+def _harmonics(b, X):
+    """The effect's orders in the model, and those its estimate left out as below the
+    noise at their frequency (``below_noise``: the first estimate, its standard error
+    from the order's z = |Y|^2 T / 2S, amplitude / sqrt(z); not in the refined layout)."""
+    out = [_harmonic_entry(b, X, j) for j in range(len(X)) if abs(X[j]) > 0]
+    for j, (x, z) in sorted((b.get("below_noise") or {}).items()):
+        if j - 1 < len(X) and abs(X[j - 1]) > 0:
+            continue   # back in the model (a later fit kept it)
+        sg = abs(x) / math.sqrt(z) if z > 0 else math.inf
+        out.append({"order": j, "amplitude": float(abs(x)), "phase": float(np.angle(x)),
+                    "sigma": float(sg) if math.isfinite(sg) else None,
+                    "identifiable": bool(sg <= SIGMA_SHARE * abs(x)), "in_refined_layout": False,
+                    "below_noise": True})
+    return sorted(out, key=lambda h: h["order"])
 
 
 def _cand_entry(d, r):

@@ -289,3 +289,19 @@ def test_runs_agree_in_the_chosen_form(tmp_path):
     for run, x in unc["by_run"].items():
         assert x == pytest.approx(C[1], rel=0.2), (run, unc["by_run"])
     assert unc["identifiable"]
+
+
+def test_orders_left_out_below_the_noise_are_reported_not_identifiable():
+    """An order the first estimate left out as below the noise is listed with that
+    estimate, sigma = C / sqrt(z), not identifiable when z < 9 (sigma > C / 3), never
+    in the refined layout; an order a later fit put back is listed once, from the model."""
+    from webline.diagnosis.report import _harmonics
+    X = np.array([0.0, 0.0, 5e-5, 0.0, 6e-5, 0.0], complex)
+    b = {"X": X, "below_noise": {1: (2e-5 * np.exp(0.3j), 4.0), 2: (1e-5, 16.0), 3: (4e-5, 3.0)}}
+    h = {x["order"]: x for x in _harmonics(b, X)}
+    assert sorted(h) == [1, 2, 3, 5]
+    assert h[1]["below_noise"] and not h[1]["in_refined_layout"] and not h[1]["identifiable"]
+    assert h[1]["amplitude"] == pytest.approx(2e-5) and h[1]["phase"] == pytest.approx(0.3)
+    assert h[1]["sigma"] == pytest.approx(2e-5 / math.sqrt(4.0))
+    assert h[2]["identifiable"]                 # z 16: sigma = C / 4
+    assert "below_noise" not in h[3] and h[3]["amplitude"] == pytest.approx(5e-5)   # back in the model
