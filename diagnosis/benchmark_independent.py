@@ -1003,17 +1003,17 @@ def detectability(truth, folder, *, simulate=None):
                 t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
                 ov0 = B._overrides(r["truth_conditions"])
                 ov = {**ov0, **r.get("ripple_set", {})}
-                res = simulate(load_system(truth_layout, ov), t)
-                res0 = simulate(load_system(wo, ov), t)
-                # the same without the drives' torque ripple: what the effect shows deterministically
-                quiet = (simulate(load_system(truth_layout, ov0), t), simulate(load_system(wo, ov0), t)) \
-                    if r.get("ripple_set") else None
-                if periodic and quiet is not None:
-                    # the ripple-rung response is noise to a run-out's lines, as the error is
-                    res, res0, ripple_part = quiet[0], quiet[1], res
+                measured = simulate(load_system(truth_layout, ov), t)   # the truth the case's data are
+                if periodic and r.get("ripple_set"):
+                    # the ripple-rung response is noise to a run-out's lines, as the error is:
+                    # the pair with and without the run-out is simulated without the ripple
+                    res, res0 = simulate(load_system(truth_layout, ov0), t), simulate(load_system(wo, ov0), t)
                     quiet = None
                 else:
-                    ripple_part = None
+                    res, res0 = measured, simulate(load_system(wo, ov), t)
+                    # the same without the drives' torque ripple: what the effect shows deterministically
+                    quiet = (simulate(load_system(truth_layout, ov0), t), simulate(load_system(wo, ov0), t)) \
+                        if r.get("ripple_set") else None
                 tt = np.asarray(res.time, float)
                 settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)
                 rng = np.random.default_rng(run.seed)
@@ -1022,8 +1022,7 @@ def detectability(truth, folder, *, simulate=None):
                 rec = {"run": r["name"], "sensors": {}}
                 for lc in sorted(facts["_sensors"]):
                     y = np.asarray(res[f"{lc}.T"], float)
-                    m, _ = measure(tt, y if ripple_part is None else np.asarray(ripple_part[f"{lc}.T"], float),
-                                   run, rng)  # the same draws as the case's data
+                    m, _ = measure(tt, np.asarray(measured[f"{lc}.T"], float), run, rng)  # the case's draws
                     v = effect_visibility(e["kind"], tt[settle], y[settle], np.asarray(res0[f"{lc}.T"], float)[settle],
                                           (m - y)[settle], run.fs_hz, tau=tau,
                                           torsional_hz=(e.get("drive") or {}).get("torsional_hz"))

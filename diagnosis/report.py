@@ -197,7 +197,7 @@ def _harmonics(b, X):
     noise at their frequency (``below_noise``: the first estimate, its standard error
     from the order's z = |Y|^2 T / 2S, amplitude / sqrt(z); not in the refined layout)."""
     out = [_harmonic_entry(b, X, j) for j in range(len(X)) if abs(X[j]) > 0]
-    for j, (x, z) in sorted((b.get("below_noise") or {}).items()):
+    for j, (x, z) in (b.get("below_noise") or {}).items():
         if j - 1 < len(X) and abs(X[j - 1]) > 0:
             continue   # back in the model (a later fit kept it)
         sg = abs(x) / math.sqrt(z) if z > 0 else math.inf
