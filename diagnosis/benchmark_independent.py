@@ -578,6 +578,18 @@ def _not_identifiable(eff, order):
     return False
 
 
+def _in_range(eff, m, truth):
+    """Whether the truth's dominant amplitude lies in the range the report gives for
+    that order over lines within the data sheet's tolerances (None: no range given)."""
+    j = m.get("dominant_order") or 1
+    h = next((h for h in eff.get("harmonics") or [] if int(h.get("order", -1)) == j), None)
+    t = next((t for t in truth["effects"] if t["element"] == m["element"] and t["kind"] == m["kind"]), None)
+    if h is None or t is None or not h.get("range_over_lines"):
+        return None
+    lo, hi = h["range_over_lines"]
+    return bool(lo <= t["C_m"][j - 1] <= hi)
+
+
 def case_targets(truth, report, score=None):
     """Per-case target measures: matches after the 2 % fundamental rule, worse
     sensors, closed shares, dominant amplitude checks, invented periodic sources."""
@@ -603,7 +615,8 @@ def case_targets(truth, report, score=None):
         flagged = _not_identifiable(eff, m.get("dominant_order") or 1)
         err = m.get("amp_rel_error")
         amp.append({"element": m["element"], "rel_error": err, "flagged_not_identifiable": flagged,
-                    "ok": bool(flagged or (err is not None and err <= AMP_TOL))})
+                    "ok": bool(flagged or (err is not None and err <= AMP_TOL)),
+                    "in_range": _in_range(eff, m, truth)})
     noise_only = not truth["effects"]
     # every hidden effect: could the data show it, and was it found (a periodic one also as an
     # element it cannot be told from, as the scorer's match allows)
@@ -701,6 +714,8 @@ def target_scores(results):
         "closed_share_in_sample": B._stats(cs_in), "closed_share_held_out": B._stats(cs_out),
         "amplitude": {"n": len(amp), "ok": sum(a["ok"] for a in amp),
                       "flagged": sum(a["flagged_not_identifiable"] for a in amp),
+                      "ranged": sum(a.get("in_range") is not None for a in amp),
+                      "in_range": sum(bool(a.get("in_range")) for a in amp),
                       "rel_errors": B._stats([a["rel_error"] for a in amp])},
         "noise_only": noise, "targets": TARGETS,
         # beside the headline (all effects): drive-effect recall over all hidden drive effects
@@ -729,6 +744,7 @@ def _verdicts(s):
         "no_invented_periodic": "n/a" if not no["cases"] else "pass" if not no["invented_periodic"] else "fail",
         "drive_recall": "n/a" if not (s.get("drive") or {}).get("true") else "no target",
         "detectable_recall": "n/a" if not (s.get("detectable") or {}).get("detectable") else "no target",
+        "amplitude_range": "n/a" if not a.get("ranged") else "no target",
     }
 
 
@@ -761,6 +777,8 @@ def target_rows(s):
         ("dominant run-out amplitude within 20 % or flagged",
          f"{a['ok']}/{a['n']} (median error {B._pct2(a['rel_errors']['median'])}, {a['flagged']} flagged)",
          "all", "amplitude"),
+        ("dominant run-out amplitude: truth inside the range the report gives over lines within the "
+         "data sheet's tolerances", f"{a.get('in_range', 0)}/{a.get('ranged', 0)}", "-", "amplitude_range"),
         ("recall over the hidden effects the data can show (each measured: truth with and without it)",
          _recall_cell(s.get("detectable") or {}), "-", "detectable_recall"),
         ("drive effects (backlash, compliance): recall over all hidden / over the detectable only",

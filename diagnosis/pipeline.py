@@ -72,8 +72,9 @@ class Options:
     structure: bool = True           # screen model-form alternatives when an effect's check says so
     max_structures: int = 8          # structural alternatives simulated at most
     confirm: bool = True             # fast engine: run the refined layout once through the co-simulation
-    transfer: bool = True            # held-out runs: leave out orders whose prediction there does not
-    #                                  carry over lines within the data sheet's tolerances (diagnosis.transfer)
+    transfer: bool = True            # lines within the data sheet's tolerances (diagnosis.transfer): each
+    #                                  order's amplitude range; held-out runs: leave out orders whose
+    #                                  prediction there does not carry over those lines
     ripple: bool = True              # fit the drives' torque ripple to the residual's humps (diagnosis.ripple)
     estimator: str = "time"          # Fourier coefficients: "time" (data regressed on simulated
     #                                  responses, diagnosis.regress; ramps and speed-dependent gains

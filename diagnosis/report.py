@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from webline.diagnosis.structure import NOT_IDENTIFIABLE
+
 SCHEMA = "webline-diagnose-1"
 
 
@@ -187,6 +189,16 @@ def _harmonic_entry(b, X, j):
     if sg is not None and j < len(sg) and np.isfinite(sg[j]):
         out["sigma"] = float(sg[j])
         out["identifiable"] = bool(sg[j] <= SIGMA_SHARE * abs(X[j]))
+    lr = (b.get("lines_range") or {}).get(j + 1)
+    if lr is not None:
+        # what lines within the data sheet's tolerances (and forms that fit about as well)
+        # would need: the fit runs fix the response times the run-out, not each alone
+        lo, hi = lr["range"]
+        out["range_over_lines"] = [lo, hi]
+        if not (lo > 0 and hi / lo <= NOT_IDENTIFIABLE):
+            out["identifiable"] = False
+            out["identifiable_basis"] = (f"lines within the data sheet's tolerances need {1e6 * lo:.3g}-"
+                                         f"{1e6 * hi:.3g} um (more than a factor {NOT_IDENTIFIABLE:g})")
     if j + 1 in (b.get("transfer_dropped") or ()):
         out["in_refined_layout"] = False   # its held-out prediction does not carry (report.transfer)
     return out
@@ -517,10 +529,15 @@ def html_report(d, rep):
         parts.append("<p>No unmodelled effect: the residual is noise.</p>")
     else:
         parts.append("<table><tr><th>#</th><th>element</th><th>kind</th><th>candidates (best first)</th>"
-                     "<th>f (Hz)</th><th>share</th><th>confidence</th><th>C<sub>j</sub> (&micro;m)</th></tr>")
+                     "<th>f (Hz)</th><th>share</th><th>confidence</th><th>C<sub>j</sub> (&micro;m; in brackets: over lines "
+                     "within the data sheet's tolerances; ?: not identifiable)</th></tr>")
         for i, ef in enumerate(rep["effects"], 1):
             cands = ", ".join(f"{c['element']} (misfit {_fmt(c.get('pattern_misfit'))})" for c in ef.get("candidates", []))
-            C = ", ".join(f"{1e6 * h['amplitude']:.1f}" for h in ef.get("harmonics", []))
+            C = ", ".join(f"{1e6 * h['amplitude']:.1f}"
+                          + (" ({:.1f}-{:.1f})".format(*(1e6 * x for x in h["range_over_lines"]))
+                             if h.get("range_over_lines") else "")
+                          + ("?" if h.get("identifiable") is False else "")
+                          for h in ef.get("harmonics", []))
             parts.append(f"<tr><td>{i}</td><td class=l>{e(ef['element'])}</td><td class=l>{e(ef['kind'])}</td>"
                          f"<td class=l>{e(cands)}</td><td>{_fmt(ef.get('fundamental_hz'))}</td>"
                          f"<td>{_fmt(100 * ef['explained_share'], 3)} %</td><td>{_fmt(ef['confidence'], 2)}</td>"

@@ -40,6 +40,12 @@ layout without it must still pass the check of :mod:`diagnosis.claims` on the
 fit runs, against the model without the effect; if not, the order stays and
 the report says its held-out prediction is not reliable. Only the held-out runs' conditions
 (speed profile, roll radius) are used, never their data.
+
+The same lines give each reported order's amplitude range, with or without
+held-out runs (:func:`amplitude_ranges`): line k needs ``|alpha_k| |X_j|``. The
+fit runs fix the line's response times the run-out, and parameters a data sheet
+leaves open move the response by tens of per cent; the statistical error of an
+order alone says nothing of that.
 """
 import logging
 
@@ -48,6 +54,7 @@ import numpy as np
 from webline.diagnosis import claims
 from webline.diagnosis import estimate as est
 from webline.diagnosis import layout_edit
+from webline.diagnosis import structure
 from webline.diagnosis import tolerances
 
 log = logging.getLogger("webline.diagnose")
@@ -174,6 +181,52 @@ def alpha_trend(per_run, a):
     return lambda fh: complex(np.exp(Lm + b * (fh - fm)))
 
 
+def _vec(resp, ctxs, fit, cand, i, j):
+    """Order ``j`` (index ``i``) of the responses ``resp`` over the runs ``ctxs`` and
+    their sensors, with each one's whitening weight: ``|Y|^2 w`` is the harmonic's z
+    (Exp(1) for noise), from the fit runs' noise floor at that frequency."""
+    v, w = [], []
+    for c in ctxs:
+        for s in c.sensors:
+            if c.name not in resp or s not in resp[c.name]:
+                continue
+            ws = _weights(fit, s, j * c.freq.get(cand.key, 0.0))
+            if ws is None:
+                continue
+            v.append(resp[c.name][s][i])
+            w.append(ws * c.T / 2.0)
+    return np.array(v, complex), np.array(w, float)
+
+
+def _scale(gk, m, wm):
+    """The least-squares scale a line's response ``gk`` needs to match ``m``."""
+    den = float(np.sum(wm * np.abs(gk) ** 2))
+    return complex(np.sum(wm * np.conj(gk) * m)) / den if den > 0 else 0.0
+
+
+def amplitude_ranges(M, G, cand, orders, fit, X, X0):
+    """Per order: the amplitude each line would need, ``|alpha_k| |X_j|`` with
+    ``alpha_k`` the scale line k's response needs to match the measured harmonics of
+    the fit runs (member 0, the refined model, needs about 1; ``X0`` = the layout's
+    own coefficients, which the responses are taken against). Returns
+    {order: {"range": [min, max], "by_line": [...]}} over every line: the fit runs
+    fix the product of response and run-out, and lines within the data sheet's
+    tolerances answer a given run-out by up to a few tens of per cent more or less
+    (independent seed 1: dominant orders off by 22-30 % with the statistical error
+    under 1 %), so the whole range is what these runs know of the amplitude."""
+    out = {}
+    for i, j in enumerate(orders):
+        m, wm = _vec(M, fit, fit, cand, i, j)
+        if len(m) == 0 or abs(X[j - 1]) == 0:
+            continue
+        dx = X[j - 1] - X0[j - 1]
+        amps = [abs(X0[j - 1] + _scale(_vec(Gk, fit, fit, cand, i, j)[0], m, wm) * dx) for Gk in G]
+        amps = [a for a in amps if np.isfinite(a) and a > 0]
+        if amps:
+            out[int(j)] = {"range": [float(min(amps)), float(max(amps))], "by_line": [float(a) for a in amps]}
+    return out
+
+
 def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
     """Per order and held-out run: the weighted share of lines in which the order
     helps the prediction, and the numbers behind it. ``M`` = measured harmonics
@@ -182,24 +235,13 @@ def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
     verdicts = []
     for i, j in enumerate(orders):
         def vec(resp, ctxs):
-            v, w = [], []
-            for c in ctxs:
-                for s in c.sensors:
-                    if c.name not in resp or s not in resp[c.name]:
-                        continue
-                    ws = _weights(fit, s, j * c.freq.get(cand.key, 0.0))
-                    if ws is None:
-                        continue
-                    v.append(resp[c.name][s][i])
-                    w.append(ws * c.T / 2.0)   # |Y|^2 w is the harmonic's z (Exp(1) for noise)
-            return np.array(v, complex), np.array(w, float)
+            return _vec(resp, ctxs, fit, cand, i, j)
         m, wm = vec(M, fit)
         m_run = [(j * c.freq.get(cand.key, 0.0), c, vec(M, [c])) for c in fit]   # each fit run alone
         alphas, chi2, trends = [], [], []
         for Gk in G:
             gk, _ = vec(Gk, fit)
-            den = float(np.sum(wm * np.abs(gk) ** 2))
-            a = complex(np.sum(wm * np.conj(gk) * m)) / den if den > 0 else 0.0
+            a = _scale(gk, m, wm)
             alphas.append(a)
             chi2.append(float(np.sum(wm * np.abs(m - a * gk) ** 2)))
             trends.append(alpha_trend([(f, vec(Gk, [c]), mc) for f, c, mc in m_run], a))
@@ -253,13 +295,14 @@ def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
 
 
 def screen(d):
-    """Run the transfer screen; may take unreliable orders out of ``d.refined_doc``
-    and append a step whose simulations the held-out gap then uses."""
+    """Run the transfer screen: every effect's amplitude range over the lines; with
+    held-out runs, may take unreliable orders out of ``d.refined_doc`` and append a
+    step whose simulations the held-out gap then uses."""
     hold = [c for c in d.ctx if not c.fit]
     fit = d.fit_ctx()
     effs = [(fe["ranked"][0]["cand"], np.asarray(fe["ranked"][0]["X"], complex)) for fe in d.final_effects]
     d.transfer = None
-    if not hold or not effs or not fit:
+    if not effs or not fit:
         return
     base = layout_edit._plain_base(d.model.copy_doc())
     doc = d.refined_doc
@@ -274,7 +317,7 @@ def screen(d):
         base_X = layout_edit.current_fourier(d.model.copy_doc(), cand.element, len(X))
         orders = [j + 1 for j in np.flatnonzero(np.abs(X - base_X) > 0)]
         if orders:
-            plan.append((cand, orders))
+            plan.append((cand, orders, X, base_X))
     # one line at a time: only its harmonics are kept (a line's simulations of 60 s
     # records at 1 kHz are ~100 MB, and there are 2 per run and line)
     G, H, failed, before, M = {}, {}, set(), None, None
@@ -288,12 +331,12 @@ def screen(d):
         n = len(d.ctx)
         w = {c.name: sim for c, sim in zip(d.ctx, sims[:n])}
         wo = {c.name: sim for c, sim in zip(d.ctx, sims[n:])}
-        for cand, orders in plan:
+        for cand, orders, _X, _X0 in plan:
             G.setdefault(cand.element, {})[k] = responses(d, fit, w, wo, cand, orders)
             H.setdefault(cand.element, {})[k] = responses(d, hold, w, wo, cand, orders)
         if k == 0:
             before = wo
-            M = {cand.element: measured(d, fit, w, wo, cand, orders) for cand, orders in plan}
+            M = {cand.element: measured(d, fit, w, wo, cand, orders) for cand, orders, _X, _X0 in plan}
         del sims, w, wo
     if 0 in failed:
         d.notes.append("transfer screen skipped: the refined model failed on a run")
@@ -301,14 +344,26 @@ def screen(d):
     ks = [k for k in range(len(docs)) if k not in failed]
     n_groups = len({groups[k] for k in ks})
     prior = np.array([1.0 / n_groups / sum(1 for q in ks if groups[q] == groups[k]) for k in ks])
+    ranges = {cand.element: amplitude_ranges(M[cand.element], [G[cand.element][k] for k in ks], cand, orders,
+                                             fit, X, X0) for cand, orders, X, X0 in plan}
+    for fe in d.final_effects:
+        b = fe["ranked"][0]
+        b["lines_range"] = rg = ranges.get(b["cand"].element) or {}
+        j = int(np.argmax(np.abs(b["X"]))) + 1
+        lo, hi = (rg.get(j) or {}).get("range", (0.0, 0.0))
+        if hi > 0 and not (lo > 0 and hi / lo <= structure.NOT_IDENTIFIABLE):
+            d.notes.append(f"the amplitude of {b['cand'].element}'s order {j} is not identifiable from these runs: "
+                           f"lines within the data sheet's tolerances need {1e6 * lo:.3g}-{1e6 * hi:.3g} um "
+                           f"to fit them; a run at another line speed would tell them apart")
     verdicts = []
-    for cand, orders in plan:
+    for cand, orders, _X, _X0 in (plan if hold else []):
         verdicts += order_verdicts(d, M[cand.element], [G[cand.element][k] for k in ks],
                                    [H[cand.element][k] for k in ks], cand, orders, fit, hold, prior)
     d.transfer = {"members": len(ks), "forms": [n for n, _ in getattr(d, "form_members", []) or []],
                   "failed_members": len(failed), "tolerances": dict(tolerances.DATA_SHEET),
                   "dynamics": {k: list(v) for k, v in tolerances.DYNAMICS.items()},
-                  "keep_share": KEEP_SHARE, "z_material": Z_MATERIAL, "orders": verdicts, "dropped": []}
+                  "keep_share": KEEP_SHARE, "z_material": Z_MATERIAL, "orders": verdicts, "dropped": [],
+                  "amplitude_ranges": {el: {str(j): v["range"] for j, v in r.items()} for el, r in ranges.items()}}
     drop = {}
     for v in verdicts:
         if not v["reliable"]:

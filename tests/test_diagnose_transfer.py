@@ -229,3 +229,28 @@ def test_a_drift_within_the_noise_is_no_trend():
     assert tr is not None
     assert np.degrees(np.angle(tr(5.0))) == pytest.approx(0.0, abs=1e-6)
     assert np.degrees(np.angle(tr(8.0))) == pytest.approx(90.0, abs=1e-6)
+
+
+def test_amplitude_range_is_what_each_line_needs():
+    """The responses are each line's to the estimated X. Line 0 (the refined model)
+    matches the measured harmonics; a line that answers 0.8x as much needs 1/0.8 of
+    X, one that answers 2x needs half: the range is |X| x [0.5, 1.25]."""
+    X = np.array([3e-4 * np.exp(0.4j)])
+    g0 = np.array([2.0 + 1.0j, -0.5 + 0.3j])
+    M = _resp(FIT, g0)
+    G = [_resp(FIT, g0), _resp(FIT, 0.8 * g0), _resp(FIT, 2.0 * g0)]
+    got = transfer.amplitude_ranges(M, G, CAND, [1], [FIT], X, np.zeros(1, complex))
+    assert got[1]["range"] == pytest.approx([0.5 * 3e-4, 1.25 * 3e-4], rel=1e-12)
+    assert got[1]["by_line"] == pytest.approx([3e-4, 3e-4 / 0.8, 1.5e-4], rel=1e-12)
+
+
+def test_a_range_wider_than_a_factor_2_is_not_identifiable():
+    """report.py: an order whose lines need amplitudes more than NOT_IDENTIFIABLE
+    apart is flagged, with the range; a narrow range keeps the statistical verdict."""
+    from webline.diagnosis import report
+    X = np.array([1e-4, 2e-5], complex)
+    b = {"X_sigma": np.array([1e-6, 1e-6]),
+         "lines_range": {1: {"range": [0.8e-4, 1.3e-4]}, 2: {"range": [0.5e-5, 3e-5]}}}
+    h1, h2 = report._harmonic_entry(b, X, 0), report._harmonic_entry(b, X, 1)
+    assert h1["identifiable"] is True and h1["range_over_lines"] == [0.8e-4, 1.3e-4]
+    assert h2["identifiable"] is False and "factor 2" in h2["identifiable_basis"]

@@ -213,12 +213,14 @@ def _run(name, hold, fund, noise, std, n=1000, profile="constant"):
                         "lc19": {"noise_rms_N": noise, "std_measured_N": std, "n": n}}}
 
 
-def _eff(el, kind, f=None, amp=None, order=1):
+def _eff(el, kind, f=None, amp=None, order=1, lines=None):
     e = {"element": el, "kind": kind, "candidates": [{"element": el}]}
     if f is not None:
         e["fundamental_hz"] = f
     if amp is not None:
         e["harmonics"] = [{"order": order, "amplitude": amp, "phase": 0.0}]
+        if lines is not None:
+            e["harmonics"][0]["range_over_lines"] = lines
     return e
 
 
@@ -240,7 +242,8 @@ def test_target_scores_on_hand_made_reports():
     # c1: found, f within 2 %, amplitude 10 % off; nominal 0.8 -> refined 0.3, achievable 0.3 (share 1.0)
     c1 = {"truth": _truth([_ecc("idler_u1", [1e-4])], [_run("r1", False, fund, 0.3, 1.0),
                                                       _run("r2", True, fund, 0.2, 1.0)]),
-          "report": {"effects": [_eff("idler_u1", "eccentricity", 1.015, 1.1e-4), _eff("speed_gain", "parameter")],
+          "report": {"effects": [_eff("idler_u1", "eccentricity", 1.015, 1.1e-4, lines=[0.9e-4, 1.3e-4]),
+                                 _eff("speed_gain", "parameter")],
                      "holdout": _gap(0.8, 0.3, 0.4, 0.35, 0.6, 0.4)}}
     # c2: right element, fundamental 3 % off: dropped (a false find and a miss); lc19 got worse
     c2 = {"truth": _truth([_ecc("guide_in", [2e-4])], [_run("r1", False, fund, 0.1, 1.0)]),
@@ -251,6 +254,8 @@ def test_target_scores_on_hand_made_reports():
     # as report.json says it (diagnosis/structure.py: range over forms and runs)
     e3["amplitude_uncertainty"] = {"dominant_order": 1, "amplitude": 3e-4, "range": [1e-4, 3e-4],
                                    "identifiable": False}
+    # ... and over lines within the data sheet's tolerances (report.py): the truth 2e-4 outside
+    e3["harmonics"][0]["range_over_lines"] = [2.5e-4, 3.5e-4]
     c3 = {"truth": _truth([_ecc("unwind", [2e-4], "out_of_round")], [_run("r1", False, fund, 0.2, 1.0)]),
           "report": {"effects": [e3], "holdout": _gap(0.6, 0.4, 0.3, 0.3)}}
     # c4: noise only, 3 records one ramped, a periodic source invented
@@ -274,7 +279,9 @@ def test_target_scores_on_hand_made_reports():
     assert s["closed_share_in_sample"]["n"] == 3
     assert s["closed_share_in_sample"]["median"] == pytest.approx(0.5)
     assert s["closed_share_held_out"]["median"] == pytest.approx(0.5) and s["closed_share_held_out"]["n"] == 1
-    assert s["amplitude"] == {"n": 2, "ok": 2, "flagged": 1, "rel_errors": s["amplitude"]["rel_errors"]}
+    # the truth inside the range over lines: c1 (1e-4 in 0.9-1.3e-4) yes, c3 (2e-4 in 2.5-3.5e-4) no
+    assert s["amplitude"] == {"n": 2, "ok": 2, "flagged": 1, "ranged": 2, "in_range": 1,
+                              "rel_errors": s["amplitude"]["rel_errors"]}
     assert s["amplitude"]["rel_errors"]["max"] == pytest.approx(0.5)
     assert s["noise_only"] == {"cases": 1, "records": 3, "ramped_records": 1, "invented_periodic": 1,
                                "invented_any": 2}
@@ -287,7 +294,7 @@ def test_target_scores_on_hand_made_reports():
     assert s2["amplitude"]["ok"] == 0 and s2["verdict"]["amplitude"] == "fail"
     assert s2["verdict"]["precision"] == "pass" and s2["verdict"]["no_worse_nrmse"] == "pass"
     md = BI.side_by_side({"own": s2, "independent": s})
-    assert md.count("\n") == 11 and "| own | independent |" in md  # 2 header lines, 9 measures
+    assert md.count("\n") == 12 and "| own | independent |" in md  # 2 header lines, 10 measures
 
 
 def test_command_rescores_both_families_side_by_side(tmp_path):
