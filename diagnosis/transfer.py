@@ -220,10 +220,18 @@ def amplitude_ranges(M, G, cand, orders, fit, X, X0):
         if len(m) == 0 or abs(X[j - 1]) == 0:
             continue
         dx = X[j - 1] - X0[j - 1]
-        amps = [abs(X0[j - 1] + _scale(_vec(Gk, fit, fit, cand, i, j)[0], m, wm) * dx) for Gk in G]
-        amps = [a for a in amps if np.isfinite(a) and a > 0]
-        if amps:
-            out[int(j)] = {"range": [float(min(amps)), float(max(amps))], "by_line": [float(a) for a in amps]}
+        amps, chi2 = [], []
+        for Gk in G:
+            gk = _vec(Gk, fit, fit, cand, i, j)[0]
+            a = _scale(gk, m, wm)
+            amps.append(abs(X0[j - 1] + a * dx))
+            chi2.append(float(np.sum(wm * np.abs(m - a * gk) ** 2)))
+        ok = [k for k, a in enumerate(amps) if np.isfinite(a) and a > 0]
+        if ok:
+            out[int(j)] = {"range": [float(min(amps[k] for k in ok)), float(max(amps[k] for k in ok))],
+                           "by_line": [float(amps[k]) for k in ok],
+                           # how well each line's pattern over sensors and runs fits (chi-square)
+                           "chi2": [chi2[k] for k in ok]}
     return out
 
 
@@ -363,7 +371,7 @@ def screen(d):
                   "failed_members": len(failed), "tolerances": dict(tolerances.DATA_SHEET),
                   "dynamics": {k: list(v) for k, v in tolerances.DYNAMICS.items()},
                   "keep_share": KEEP_SHARE, "z_material": Z_MATERIAL, "orders": verdicts, "dropped": [],
-                  "amplitude_ranges": {el: {str(j): v["range"] for j, v in r.items()} for el, r in ranges.items()}}
+                  "amplitude_ranges": {el: {str(j): v for j, v in r.items()} for el, r in ranges.items()}}
     drop = {}
     for v in verdicts:
         if not v["reliable"]:
