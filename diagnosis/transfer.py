@@ -209,7 +209,8 @@ def amplitude_ranges(M, G, cand, orders, fit, X, X0):
     ``alpha_k`` the scale line k's response needs to match the measured harmonics of
     the fit runs (member 0, the refined model, needs about 1; ``X0`` = the layout's
     own coefficients, which the responses are taken against). Returns
-    {order: {"range": [min, max], "by_line": [...]}} over every line: the fit runs
+    {order: {"range": [min, max], "by_line": [...], "chi2": [...]}} over every line
+    (chi2: how well the line's scaled response fits the fit runs): the fit runs
     fix the product of response and run-out, and lines within the data sheet's
     tolerances answer a given run-out by up to a few tens of per cent more or less
     (independent seed 1: dominant orders off by 22-30 % with the statistical error
