@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from webline.diagnosis.structure import NOT_IDENTIFIABLE
+from webline.diagnosis.structure import NOT_IDENTIFIABLE, identifiable_range
 
 SCHEMA = "webline-diagnose-1"
 
@@ -195,7 +195,7 @@ def _harmonic_entry(b, X, j):
         # would need: the fit runs fix the response times the run-out, not each alone
         lo, hi = lr["range"]
         out["range_over_lines"] = [lo, hi]
-        if not (lo > 0 and hi / lo <= NOT_IDENTIFIABLE):
+        if not identifiable_range(lo, hi):
             out["identifiable"] = False
             out["identifiable_basis"] = (f"lines within the data sheet's tolerances need {1e6 * lo:.3g}-"
                                          f"{1e6 * hi:.3g} um (more than a factor {NOT_IDENTIFIABLE:g})")

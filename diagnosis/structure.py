@@ -50,6 +50,11 @@ MAX_TIED = 4             # ... up to this many more
 NOT_IDENTIFIABLE = 2.0   # dominant-order amplitude range (max/min) beyond which it is not identifiable
 
 
+def identifiable_range(lo, hi):
+    """An amplitude whose range [lo, hi] spans at most ``NOT_IDENTIFIABLE`` (max/min)."""
+    return lo > 0 and hi / lo <= NOT_IDENTIFIABLE
+
+
 def alternatives(d):
     """[(name, description, {dotted key: value})] in screening order."""
     from webline.diagnosis import others
@@ -410,11 +415,11 @@ def screen(d):
             Gm, keeps = [], []
             for cand, X0 in members:
                 pr = alone.get(cand.element, probe)
+                keep = np.abs(X0) > 0
                 # each member's response on its own angle (for the polish) and on the lead's (the joint fit)
                 for on in ((cand, lead) if cand is not lead else (cand,)):
                     Hp, W = _stack(d, on, lambda c, s_: _harmonics(d, c, on, pr[c.name].columns[s_]
                                                                    - nom_alt[c.name].columns[s_]))
-                    keep = np.abs(X0) > 0
                     G = np.where(keep[None, :], Hp / np.where(keep, X0, 1.0)[None, :], 0.0)
                     if on is cand:
                         Gs[cand.element] = (G, W, keep)
@@ -564,7 +569,7 @@ def screen(d):
         j = int(np.argmax(np.abs(Xc)))
         amps = {r["name"]: float(abs(r["X"][cand.element][j])) for r in as_well if cand.element in r["X"]}
         lo, hi = min(amps.values()), max(amps.values())
-        ident = lo > 0 and hi / lo <= NOT_IDENTIFIABLE
+        ident = identifiable_range(lo, hi)
         unc[cand.element] = {
             "dominant_order": j + 1, "amplitude": float(abs(Xc[j])), "range": [lo, hi],
             "by_form": amps, "identifiable": bool(ident),
@@ -584,7 +589,7 @@ def screen(d):
             unc[cand.element]["by_run"] = {k: v[0] for k, v in runs.items()}
             unc[cand.element]["by_run_form"] = chosen.get("form", chosen["name"])
         xs = [x for x, _ in runs.values() if x > 0]
-        if len(xs) >= 2 and max(xs) / min(xs) > NOT_IDENTIFIABLE:
+        if len(xs) >= 2 and not identifiable_range(min(xs), max(xs)):
             # a run-out is the same at every speed: runs that need amplitudes a factor 2
             # apart say the model does not carry the effect's response from one to the other
             unc[cand.element].update({"identifiable": False, "by_run": {k: v[0] for k, v in runs.items()}})

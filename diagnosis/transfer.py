@@ -360,7 +360,7 @@ def screen(d):
         b["lines_range"] = rg = ranges.get(b["cand"].element) or {}
         j = int(np.argmax(np.abs(b["X"]))) + 1
         lo, hi = (rg.get(j) or {}).get("range", (0.0, 0.0))
-        if hi > 0 and not (lo > 0 and hi / lo <= structure.NOT_IDENTIFIABLE):
+        if hi > 0 and not structure.identifiable_range(lo, hi):
             d.notes.append(f"the amplitude of {b['cand'].element}'s order {j} is not identifiable from these runs: "
                            f"lines within the data sheet's tolerances need {1e6 * lo:.3g}-{1e6 * hi:.3g} um "
                            f"to fit them; a run at another line speed would tell them apart")
