@@ -115,7 +115,7 @@ def worst_band(d, noise):
     G = ripple.responses(_only(d, c), d.refined_doc, sims, view=ripple.fine)
     floor = misfit_floor(c)
     resid = {s: ripple.welch((c.meas[s] - sims[c.name].columns[s])[c.mask], c.fs) for s in c.sensors}
-    best = None
+    bands = []
     for fc in BAND_CENTRES_HZ:
         if 2.0 * fc > 0.45 * c.fs:
             continue
@@ -132,12 +132,14 @@ def worst_band(d, noise):
         h["misfit_ratio"] = got[0] / floor
         h["ripple_explains"] = got[1]
         h["rigid_fit"] = got   # the rigid line's fit of this band: screen() starts from it
-        if h["misfit_ratio"] > FLOOR_X and (best is None or h["misfit_ratio"] > best["misfit_ratio"]):
-            best = h
-    if best is not None:
+        log.info("  band %.3g-%.3g Hz: rigid misfit %.3g x floor, ripple explains %s", lo, hi, h["misfit_ratio"], got[1])
+        if h["misfit_ratio"] > FLOOR_X:
+            bands.append(h)
+    bands.sort(key=lambda h: -h["misfit_ratio"])
+    for best in bands[:1]:
         log.info("  the rigid line's ripple fit misses the residual's spectrum most at %.3g-%.3g Hz on %s "
                  "(misfit %.1f x what noise leaves)", *best["band_hz"], best["sensor"], best["misfit_ratio"])
-    return best
+    return bands
 
 
 class _only:
@@ -278,15 +280,14 @@ def screen(d):
         return
     humps = [h for h in claims.humps(d, noise, ripple_fit=rf)
              if h["kind"] == "unexplained resonance" and h["frequency_hz"] >= F_MIN_HZ]
-    if not humps:
-        wb = worst_band(d, noise)
-        humps = [wb] if wb is not None else []
+    humps = humps[:MAX_HUMPS]
+    humps += worst_band(d, noise)
     # a drive the other-effects screen gave a shaft or a dead zone already is not ideal any more
     taken = {o["element"] for o in getattr(d, "other", []) or [] if o["kind"] in ("compliance", "backlash")}
     specs = [sp for sp in others.drive_candidates(d) if sp[0] not in taken]
     d.compliance = []
-    for hump in humps[:MAX_HUMPS]:
-        if not specs:
+    for hump in humps:
+        if not specs or any(r["claimed"] for r in d.compliance):
             break
         c = next(c for c in d.ctx if c.name == hump["run"])
         base = hump.get("rigid_fit") or spectral_fit(d, noise, d.refined_doc, d.steps[-1]["sims"], hump)

@@ -537,6 +537,9 @@ def screen(d):
         if not ok:
             ok, reason = _trade(cur_nr, nom_nr, best["nrmse"], left_energy({c.name: c.nominal for c in fit}),
                                 e_best, reason, d.opt.max_worse)
+        if ok:  # and against the layout without the effects, run by run
+            ok, reason = claims.run_by_run(fit, {c.name: c.nominal for c in fit}, best["sims"],
+                                           d.opt.max_worse, reason)
         best["check"] = {"accepted": ok, "reason": reason, "local_before": e_cur, "local_after": e_best}
         if ok:
             chosen = best
@@ -766,6 +769,10 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     # of benchmark c01/c07 too, on re-estimation differences of the primary
     for r in sorted(cands, key=lambda r: r["score"]):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
+        if why is None:  # no run worse than the layout without the effects
+            ok, w = claims.run_by_run(d.fit_ctx(), {c.name: c.nominal for c in d.fit_ctx()}, r["sims"],
+                                      d.opt.max_worse, None)
+            why = None if ok else f"{r['form']} without them {w}"
         tried.append({"name": r["name"], "score": r["score"], "sensors": rows, "accepted": why is None,
                       "reason": why})
         if why is None:
