@@ -611,6 +611,10 @@ def score_case(truth, report):
 def _match_detail(mode, t, r, truth):
     d = {"mode": mode, "kind": t["kind"], "element": t["element"], "reported_element": r.get("element"),
          "candidates": _cands(r), "confidence": r.get("confidence")}
+    if t["kind"] == "compliance":   # a shaft is found on its element; how well its mode is placed is reported
+        f_true, f_rep = (t.get("drive") or {}).get("torsional_hz"), r.get("fundamental_hz")
+        d["torsional_true_hz"], d["torsional_reported_hz"] = f_true, f_rep
+        d["torsional_rel_error"] = abs(f_rep - f_true) / f_true if f_rep and f_true else None
     if t["kind"] in PERIODIC:
         fit = [x for x in truth["runs"] if not x["holdout"]] or truth["runs"]
         f_true = float(np.mean([x["fundamental_hz"][t["element"]] for x in fit]))
@@ -694,7 +698,7 @@ def summarize(results):
     per_kind = {}
     for k in KINDS:
         per_kind[k] = {"true": 0, "reported": 0, "matched": 0, "exact": 0, "ambiguous": 0}
-    f_err, amp_err, ph_err = [], [], []
+    f_err, amp_err, ph_err, ft_err = [], [], [], []
     noise_only = {"cases": 0, "false_effects": 0, "cases_with_false": 0}
     gaps_in, gaps_out, gaps_in_ecc, gaps_out_ecc, oracle_out_ecc = [], [], [], [], []
     failed = []
@@ -728,6 +732,8 @@ def summarize(results):
             pk[m["mode"]] += 1
             if m.get("f_rel_error") is not None:
                 f_err.append(m["f_rel_error"])
+            if m.get("torsional_rel_error") is not None:
+                ft_err.append(m["torsional_rel_error"])
             if m.get("amp_rel_error") is not None and m["mode"] == "exact":
                 amp_err.append(m["amp_rel_error"])
                 ph_err.append(m["phase_error_rad"])
@@ -765,6 +771,7 @@ def summarize(results):
         "per_kind": per,
         "periodic": pm,
         "fundamental_rel_error": _stats(f_err),
+        "torsional_rel_error": _stats(ft_err),
         "dominant_amplitude_rel_error": _stats(amp_err),
         "dominant_phase_error_rad": _stats(ph_err),
         "noise_only": noise_only,
@@ -927,6 +934,10 @@ def markdown(summary, results=None, meta=None):
     fe = s["fundamental_rel_error"]
     L.append(f"| fundamental frequency error (matched periodic) | median {_pct2(fe['median'])}, max "
              f"{_pct2(fe['max'])} (n={fe['n']}) | - | - |")
+    te = s.get("torsional_rel_error") or {"n": 0}
+    if te["n"]:
+        L.append(f"| torsional mode of a found shaft against the truth's (matched compliance) | median "
+                 f"{_pct2(te['median'])}, max {_pct2(te['max'])} (n={te['n']}) | - | - |")
     ae = s["dominant_amplitude_rel_error"]
     pe = s["dominant_phase_error_rad"]
     L.append(f"| dominant harmonic amplitude / phase error (exact matches) | median {_pct2(ae['median'])}, max "

@@ -474,6 +474,11 @@ class Diagnosis:
             if self.kappa_allowed(k) and self.opt.kappa_span > 0 \
                     and all(c.theta_src[k.key] == "model" for c in fit):
                 kap = self._refine_kappa_joint(fit, k)
+                other = self._kappa_lands_on(fit, k, kap) if kap else None
+                if other is not None:
+                    log.info("  %s: a speed scale of %+.2f %% would move its line onto %s; kept at the "
+                             "model's speed", k.element, 100 * kap, other)
+                    kap = 0.0
             for c in self.ctx:
                 c.kappa[k.key] = kap
             if self.kappa_per_run(k) and self.opt.kappa_span > 0:
@@ -562,6 +567,28 @@ class Diagnosis:
         or rewind's start radius (``experiment.roll_radius.<roll>``), which each run
         sets and which can be off by a few per cent (issue 9 item 2)."""
         return k.model in ("UnwindRoll", "RewindRoll")
+
+    def _kappa_lands_on(self, fit, k, kap):
+        """The line of another family (at its model's speed) that the speed scale
+        ``kap`` moves one of ``k``'s orders onto, as "element order j", or None. A
+        radius error is a hypothesis the data must need: when another element
+        already turns at that line's frequency, it explains it as the layout stands
+        (independent seed-2 c17: roller9 scaled by -0.83 % sat on order 4 of the
+        S-wrap leader, the true source). Coincident within half a bin of the
+        shortest fit run; lines already that close unscaled are a tie, not a move."""
+        for c in fit:
+            tol = 0.5 / c.T
+            for j in self.orders_for(c, k.key):
+                f0 = j * c.freq[k.key]
+                f1 = f0 * (1.0 + kap)
+                for k2 in self.cands:
+                    if k2.element == k.element or c.freq.get(k2.key, 0.0) <= 0:
+                        continue
+                    for i in self.orders_for(c, k2.key):
+                        f2 = i * c.freq[k2.key]
+                        if abs(f1 - f2) < tol <= abs(f0 - f2):
+                            return f"{k2.element} order {i}"
+        return None
 
     def _data_speed_scale(self, c, k, sim):
         """How much faster the data's own angle of roll ``k`` (pulses or encoder)

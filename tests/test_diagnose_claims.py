@@ -128,6 +128,61 @@ def test_a_stretched_speed_master_line_cannot_take_an_idlers_line():
     assert "path.sw_leader.radius" not in doc["set"]
 
 
+
+def test_an_idlers_radius_error_may_not_carry_its_line_onto_another_elements_order():
+    """Independent seed-2 c17: the S-wrap leader (1.1289 Hz) is eccentric with a strong
+    order 4 (4.5154 Hz); an idler turns at 4.553 Hz. Scaled by -0.83 % the idler's
+    family sits on the leader's order 4 and would take it; the layout's idler radius
+    is not in question when another element turns at that line as the layout stands.
+    The idler keeps the model's speed and the leader is found."""
+    fs, n = 100.0, 6000
+    t = np.arange(n) / fs
+    f_lead, f_idl = 1.1289, 4.553
+    th_lead = 2 * np.pi * f_lead * t
+    y = 0.8 * np.sin(th_lead + 0.2) + 3.0 * np.sin(4 * th_lead + 0.3) + np.random.default_rng(1).normal(0, 0.2, n)
+    d = _fake_diagnosis({"lc9.T": y}, fs, t, models={"lc9.T": np.zeros(n)})
+    d.opt.harmonics = 4
+    lead = Candidate("eccentricity", "sw_leader", "sw_leader", "DrivenRoller", 0.154, "sw_leader.theta")
+    idler = Candidate("eccentricity", "roller9", "roller9", "IdleRoller", 0.0381, "roller9.theta")
+    d.cands = [lead, idler]
+    c = d.ctx[0]
+    c.theta = {lead.key: th_lead, idler.key: 2 * np.pi * f_idl * t}
+    c.theta_src = {lead.key: "model", idler.key: "model"}
+    c.freq = {lead.key: f_lead, idler.key: f_idl}
+    kap = d._refine_kappa_joint([c], idler)
+    assert kap == pytest.approx(4 * f_lead / f_idl - 1.0, abs=1e-3)   # alone, the scale finds the line ...
+    assert d._kappa_lands_on([c], idler, kap) == "sw_leader order 4"
+    assert d._kappa_lands_on([c], idler, 0.01) is None                 # ... a scale onto no other line is free
+    d.opt.max_effects = 1
+    d.which()                                                          # ... which() keeps the model's speed
+    assert c.kappa[idler.key] == 0.0
+    assert d.effects[0]["best"]["cand"] is lead
+
+
+def test_a_check_passes_pooled_runs_but_not_a_run_made_worse():
+    """Independent seed-2 c07: pooled over two fit runs lc9 improved (1.039 -> 1.035),
+    run by run it went 1.055 -> 1.090 and 1.007 -> 0.916. The run-by-run rule refuses
+    what the pooled rule lets through; with one run it adds nothing."""
+    n = 1000
+    t = np.arange(n) / 100.0
+    rng = np.random.default_rng(2)
+    ys = {"a": np.sin(2 * np.pi * 0.5 * t) + rng.normal(0, 0.1, n), "b": 3 * np.sin(2 * np.pi * 0.7 * t)}
+    ctxs = [SimpleNamespace(name=k, sensors=["lc9.T"], meas={"lc9.T": y}) for k, y in ys.items()]
+    before = {k: Sim(None, {"lc9.T": np.zeros(n)}) for k in ys}
+    # run a: a wrong prediction (worse); run b: most of the signal explained (much better)
+    after = {"a": Sim(None, {"lc9.T": 0.4 * np.cos(2 * np.pi * 0.5 * t)}),
+             "b": Sim(None, {"lc9.T": 2.0 * np.sin(2 * np.pi * 0.7 * t)})}
+    pooled_b = claims.nrmse_over(ctxs, before, "lc9.T")
+    pooled_a = claims.nrmse_over(ctxs, after, "lc9.T")
+    assert pooled_a < pooled_b                                            # the pooled rule passes it
+    w = claims.worse_by_run(ctxs, before, after, 0.02)
+    assert [x[:2] for x in w] == [("a", "lc9.T")]
+    # by hand: NRMSE^2 of run a goes from 1 to 1 + 0.08 / (0.5 + 0.01) (the cosine is orthogonal)
+    assert w[0][3] / w[0][2] == pytest.approx(math.sqrt(1 + 0.08 / 0.51), rel=0.02)
+    ok, why = claims.run_by_run(ctxs, before, after, 0.02, "fine")
+    assert not ok and "run a" in why and "lc9.T" in why
+    assert claims.run_by_run(ctxs[1:], before, after, 0.02, "fine") == (True, "fine")
+
 # ------------------------------------------------------ check in refine ----
 def test_refine_drops_an_effect_that_makes_a_sensor_worse(tmp_path):
     """Two effects at one element's frequency: the first explains lc9, the second

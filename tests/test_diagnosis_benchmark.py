@@ -211,6 +211,11 @@ def test_scorer_counts_on_hand_made_reports():
     tq["runs"][0]["drive_torque"] = {"sw_leader": {"min_Nm": 0.02, "max_Nm": 0.05}}
     assert B.torque_reverses(tq, "sw_leader") is False
     assert B.torque_reverses(tq, "unwind") is None
+    # a shaft: found on its element; the torsional mode's error reported, not a condition of the match
+    tc = _truth([("rewind", "compliance")], "compliance")
+    tc["effects"][0]["drive"] = {"torsional_hz": 10.0}
+    (m,) = B.score_case(tc, {"effects": [dict(_eff("rewind", "compliance"), fundamental_hz=8.4)]})["matches"]
+    assert m["torsional_rel_error"] == pytest.approx(0.16) and m["torsional_true_hz"] == 10.0
     # noise only: every reported effect is false
     t5 = _truth([], "noise_only")
     sc5 = B.score_case(t5, {"effects": [_eff("guide_in", "eccentricity", f=6.8)]})
