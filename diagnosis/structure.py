@@ -47,6 +47,7 @@ RECOVER = 0.80           # ... or: the share of what the secondary sources expla
 CLOSES = 0.5             # ... or: the share of the gap from the one-source form to the noise floor they close, below
 TIE = 0.01               # predicted scores within this share of the second best's are simulated too ...
 MAX_TIED = 4             # ... up to this many more
+MAX_SWAPS = 3            # tied members tried in a primary source's place, in the set without the secondary ones
 NOT_IDENTIFIABLE = 2.0   # dominant-order amplitude range (max/min) beyond which it is not identifiable
 
 
@@ -318,6 +319,11 @@ def screen(d):
     sec_fes = [fe for fe, _ in sec]
     effs_p = [e for e in effs if all(e[2] is not fe for fe in sec_fes)]
     without = ", ".join(fe["ranked"][0]["cand"].element for fe in sec_fes)
+    swaps = _swaps(d, effs_p, sec) if sec_fes else []
+    # every source a screened set may hold: the effects and the members tried in a primary's place
+    pool = list(effs)
+    for _, _, use in swaps:
+        pool += [u for u in use if all(u[0].element != e[0].element for e in pool)]
     if not why:
         log.info("  model form: no trigger")
         return
@@ -344,7 +350,7 @@ def screen(d):
         return out
 
     def with_all(doc, Xs):
-        for cand, _, _ in effs:
+        for cand, _, _ in pool:
             if cand.element in Xs:  # a set without the secondary sources leaves them out
                 doc = d.with_effect(doc, cand, Xs[cand.element])
         return doc
@@ -367,15 +373,22 @@ def screen(d):
     # score (the alternative's nominal residual minus the harmonic energy X1 explains)
     stage_a = []
 
-    def stage_a_one(name, desc, sets, use=None):
+    def stage_a_one(name, desc, sets, use=None, swap=None):
         use = effs if use is None else use
         form = name
         if use is not effs:
-            name = f"{name}, without {without}"
-            desc = f"{desc}; without {without}"
+            # a swap onto a secondary source's element keeps that element: without the others
+            rest = [fe["ranked"][0]["cand"].element for fe in sec_fes
+                    if not swap or fe["ranked"][0]["cand"].element != swap[1]]
+            sw = f", {swap[1]} in the place of {swap[0]}" if swap else ""
+            wo = f", without {', '.join(rest)}" if rest else ""
+            name = f"{name}{sw}{wo}"
+            desc = f"{desc}{sw}{wo}"
         entry = {"name": name, "form": form, "description": desc, "set": sets}
         if use is not effs:
             entry["without"] = [fe["ranked"][0]["cand"].element for fe in sec_fes]
+        if swap:
+            entry["swap"] = {"replaced": swap[0], "by": swap[1]}
         d.structure["screened"].append(entry)
         try:
             alt0 = _apply(zero, sets)
@@ -463,6 +476,12 @@ def screen(d):
         stage_a_one("as modelled", "the layout's own form", {}, effs_p)
         for name, desc, sets in alts:
             stage_a_one(name, desc, sets, effs_p)
+            # ... and with a primary source replaced by another member of its tie: the layout's
+            # form chose the member, and a form that passes one source to the other zone may
+            # need another (independent seed-2 c07: roller19 reported as idler_r1 plus a phantom
+            # idler_u1; roller19 alone in "feedforward reference" fits every run better)
+            for old, new, use in swaps:
+                stage_a_one(name, desc, sets, use, swap=(old, new))
     # per drive: when no feed forward on every loop is the best predicted form, which drives?
     for pars in ((False, True) if sec_fes else (False,)):
         best_a = min((x for x in stage_a if ("without" in x[0]) == pars),
@@ -478,6 +497,9 @@ def screen(d):
     full_a = [x for x in stage_a if "without" not in x[0]]
     pars_a = [x for x in stage_a if "without" in x[0]]
     to_b = full_a[:2] + pars_a[:2]
+    # the best predicted swap too: a swap is another hypothesis, not a variant of the forms
+    to_b += [x for x in pars_a if "swap" in x[0]][:1]
+    to_b = [x for i, x in enumerate(to_b) if all(x is not y for y in to_b[:i])]
     # forms the prediction cannot tell from the second best are simulated too: two sources at
     # one frequency fit two load cells' harmonics exactly in any form (seed-1 c05: all seven
     # full-set forms predicted 0.7320-0.7331), and list order must not choose
@@ -490,7 +512,7 @@ def screen(d):
         name = entry["name"]
         if d.opt.estimator == "time":
             try:
-                X1s, sims1 = _time_domain(d, alt0, effs, X1s, fit, name, sim_fit, with_all)
+                X1s, sims1 = _time_domain(d, alt0, pool, X1s, fit, name, sim_fit, with_all)
             except SimulationFailed as exc:
                 entry["not_screened"] = f"simulation failed: {exc}"
                 continue
@@ -503,7 +525,7 @@ def screen(d):
             sims1 = sim_fit(with_all(alt0, X1s), f"structure {name} refined")
             nr1, sc1 = _score(d, sims1)
             X2s = {}
-            for cand, X0, _ in effs:
+            for cand, X0, _ in pool:
                 if cand.element not in Gs:
                     continue
                 G, W, keep = Gs[cand.element]
@@ -549,6 +571,8 @@ def screen(d):
                                "local_before": e_cur, "local_after": e_best})
     if sec_fes:
         chosen = _parsimony(d, chosen, [r for r in scored if "without" in r], effs, sec, e_cur, cur_nr)
+    if chosen.get("swap"):
+        _take_swap(d, chosen, pool)
     for r in scored:
         if r is not chosen and r is not results[0]:
             d.rejected.append({"element": r["name"], "kind": "structure", "stage": "structure screen",
@@ -563,7 +587,7 @@ def screen(d):
     d.form_members = [(r["name"], r["doc"]) for r in as_well
                       if "doc" in r and r is not chosen and "without" not in r]
     unc = {}
-    for cand, X0, fe in effs:
+    for cand, X0, fe in pool:
         if fe is None and chosen is results[0]:
             continue
         Xc = chosen["X"].get(cand.element)
@@ -616,8 +640,8 @@ def screen(d):
     d.structure["amplitude_uncertainty"] = unc
     if chosen is not results[0]:
         d.refined_doc = chosen["doc"]
-        for cand, X0, fe in effs:
-            if fe is not None and cand.element in chosen["X"]:
+        for cand, X0, fe in pool:
+            if fe is not None and cand.element in chosen["X"] and fe["ranked"][0]["cand"].element == cand.element:
                 fe["ranked"][0]["X"] = chosen["X"][cand.element]
                 fe["structure"] = chosen.get("form", chosen["name"])
         # a rejected effect that the new form makes hold: back in (the form passed the check with it)
@@ -798,6 +822,8 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
         fe, p = dropped[el]
         b = fe["ranked"][0]
         d.final_effects = [x for x in d.final_effects if x is not fe]
+        if r.get("swap") and r["swap"]["by"] == el:
+            continue   # not dropped: it takes the primary's place (_take_swap)
         d.rejected.append({
             "element": el, "kind": b["cand"].kind, "stage": "parsimony (structure screen)",
             "reason": (f"explained by {r['form']} transmitting {p}'s line: without {el}, sum NRMSE^2 "
@@ -808,6 +834,55 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
                        f"explains what it explained")
     log.info("  parsimony: %s (%s)", r["name"], text)
     return r
+
+
+def _swaps(d, effs_p, sec):
+    """[(primary element, member, set)]: the set without the secondary sources with one
+    primary source replaced by another member of its tie (up to :data:`MAX_SWAPS`,
+    turning at its frequency in every fit run, a secondary source's element included:
+    the phantom may be the primary), estimated alone on the primary's measured
+    harmonics and orders."""
+    prims = {p for _, p in sec}
+    here = {cand.element for cand, _, _ in effs_p}
+    out = []
+    for i, (cand, X0, fe) in enumerate(effs_p):
+        if fe is None or cand.element not in prims:
+            continue
+        n = 0
+        for r in fe["ranked"][1:]:
+            m = r["cand"]
+            if n >= MAX_SWAPS or m.element in here or r.get("G") is None or r.get("M") is None:
+                continue
+            if any(abs(c.freq.get(m.key, 0.0) - c.freq.get(cand.key, 0.0)) > 0.5 / c.T for c in d.fit_ctx()):
+                continue
+            X, _ = est.solve_fourier(r["M"], r["G"], r["W"])
+            use = list(effs_p)
+            use[i] = (m, np.where(np.abs(X0) > 0, X, 0.0), fe)
+            out.append((cand.element, m.element, use))
+            n += 1
+    return out
+
+
+def _take_swap(d, chosen, pool):
+    """The chosen set replaced a primary source by another member of its tie: that
+    member becomes the effect's first candidate (its record and estimate), the
+    replaced element a candidate behind it, and ``d.rejected`` says why."""
+    old, new = chosen["swap"]["replaced"], chosen["swap"]["by"]
+    for fe in d.final_effects:
+        if fe["ranked"][0]["cand"].element != old:
+            continue
+        i = next(i for i, r in enumerate(fe["ranked"]) if r["cand"].element == new)
+        fe["ranked"].insert(0, fe["ranked"].pop(i))
+        fe["ranked"][0]["X"] = chosen["X"][new]
+        fe["structure"] = chosen.get("form", chosen["name"])
+        fe["swapped_from"] = old
+        d.rejected.append({"element": old, "kind": fe["ranked"][0]["cand"].kind, "stage": "structure screen",
+                           "reason": f"replaced by {new} (same frequency) in the set '{chosen['name']}': "
+                                     f"{chosen['check']['reason']}", "nrmse_after": chosen["nrmse"]})
+        d.notes.append(f"{fe['ranked'][0]['cand'].kind} of {new}, not {old}: in the form '{chosen['form']}' one "
+                       f"source on {new} explains what {old} and a second source at its frequency did")
+        log.info("  %s in the place of %s (%s)", new, old, chosen["name"])
+        return
 
 
 def _readmit(d, cand, X):

@@ -137,3 +137,47 @@ def test_two_sources_at_one_frequency_are_fitted_jointly():
     # summed one by one, each alone would claim the whole line: what the joint fit prevents
     one = structure._joint_fit(M, [G2], W, [np.array([True, True])])[0]
     assert abs(one[0]) > 2 * abs(X2[0])
+
+
+def test_a_primary_source_is_tried_as_each_member_of_its_tie():
+    """structure._swaps / _take_swap (independent seed-2 c07: roller19 reported as
+    idler_r1 plus a phantom idler_u1). The set without the secondary source is also
+    screened with the primary replaced by each member of its tie that turns at its
+    frequency, the secondary's own element included, each estimated alone on the
+    primary's measured harmonics; a chosen swap makes that member the effect."""
+    from types import SimpleNamespace
+
+    import numpy as np
+    from webline.diagnosis import structure
+    from webline.diagnosis.candidates import Candidate
+
+    def cand(el):
+        return Candidate("eccentricity", el, el, "IdleRoller", 0.0381, f"{el}.theta")
+    r1, r19, r9, u1 = (cand(e) for e in ("idler_r1", "roller19", "roller9", "idler_u1"))
+    G19 = np.array([[0.2 + 0.1j, 0.05], [1.0 - 0.3j, 0.4j]])
+    X19 = np.array([3e-4 * np.exp(0.7j), 4e-5])
+    M = G19 * X19[None, :]
+    W = np.array([1.0, 2.0])
+    rec = {c.element: {"cand": c, "G": G19 if c is r19 else np.ones((2, 2), complex), "M": M, "W": W,
+                       "X": np.array([1e-4, 0.0], complex)} for c in (r1, r19, r9, u1)}
+    fe_p = {"ranked": [rec[e] for e in ("idler_r1", "roller19", "roller9", "idler_u1")]}
+    fe_s = {"ranked": [rec["idler_u1"]], "same_frequency_as": "idler_r1"}
+    ctx = SimpleNamespace(T=60.0, freq={r1.key: 4.553, r19.key: 4.553, u1.key: 4.5531, r9.key: 4.60})
+    d = SimpleNamespace(fit_ctx=lambda: [ctx], final_effects=[fe_p, fe_s], rejected=[], notes=[])
+    X0 = np.array([2e-4, 3e-5], complex)
+    sw = structure._swaps(d, [(r1, X0, fe_p)], [(fe_s, "idler_r1")])
+    # roller9 turns 1 % faster: not a member of this tie; the secondary's element is
+    assert [(old, new) for old, new, _ in sw] == [("idler_r1", "roller19"), ("idler_r1", "idler_u1")]
+    (c19, X, fe), = sw[0][2]
+    assert c19 is r19 and fe is fe_p
+    assert X == pytest.approx(X19, rel=1e-9)
+    # an order the primary does not carry stays out
+    sw0 = structure._swaps(d, [(r1, np.array([2e-4, 0.0], complex), fe_p)], [(fe_s, "idler_r1")])
+    assert sw0[0][2][0][1][1] == 0
+    chosen = {"swap": {"replaced": "idler_r1", "by": "roller19"}, "X": {"roller19": X19},
+              "name": "feedforward reference, roller19 in the place of idler_r1, without idler_u1",
+              "form": "feedforward reference", "check": {"reason": "one source fewer"}, "nrmse": {"lc9.T": 0.9}}
+    structure._take_swap(d, chosen, [])
+    assert fe_p["ranked"][0]["cand"] is r19 and fe_p["ranked"][1]["cand"] is r1
+    assert fe_p["ranked"][0]["X"] is X19 and fe_p["structure"] == "feedforward reference"
+    assert d.rejected[0]["element"] == "idler_r1" and "roller19" in d.rejected[0]["reason"]
