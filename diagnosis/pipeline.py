@@ -574,8 +574,8 @@ class Diagnosis:
         radius error is a hypothesis the data must need: when another element
         already turns at that line's frequency, it explains it as the layout stands
         (independent seed-2 c17: roller9 scaled by -0.83 % sat on order 4 of the
-        S-wrap leader, the true source). Coincident within half a bin of the
-        shortest fit run; lines already that close unscaled are a tie, not a move."""
+        S-wrap leader, the true source). Coincident: within half a frequency bin of
+        a fit run's window; lines already that close unscaled are a tie, not a move."""
         for c in fit:
             tol = 0.5 / c.T
             for j in self.orders_for(c, k.key):
