@@ -360,3 +360,21 @@ def test_orders_left_out_below_the_noise_are_reported_not_identifiable():
     assert h[1]["sigma"] == pytest.approx(2e-5 / math.sqrt(4.0))
     assert h[2]["identifiable"]                 # z 16: sigma = C / 4
     assert "below_noise" not in h[3] and h[3]["amplitude"] == pytest.approx(5e-5)   # back in the model
+
+
+def test_an_order_the_data_show_but_the_fit_left_out_is_listed_not_identifiable():
+    """Independent seed-2 c08: the unwind's dominant order 1 was clearly on its angle in
+    the family screen and the time-domain fit left it at zero; the report listed orders
+    2-6 only. Such an order is listed with the per-order gain estimate (M = G X), not
+    identifiable, not in the refined layout; a weak order left at zero is not."""
+    from webline.diagnosis.report import _harmonics
+    G = np.array([[1.0 + 0.2j, 0.5, 0.3j], [0.4, 0.2 - 0.1j, 0.1]])
+    Xt = np.array([5e-5 * np.exp(1.1j), 1e-6, 4e-5])
+    X = np.array([0.0, 0.0, 4e-5], complex)
+    b = {"X": X, "G": G, "M": G * Xt[None, :], "W": np.ones(2),
+         "score": {"fits": {"run1": {}, "run2": {}}, "z_order": {1: 22.0, 2: 12.0, 3: 900.0}}}
+    h = {x["order"]: x for x in _harmonics(b, X)}
+    assert sorted(h) == [1, 3]                   # order 2: z 12 over 2 runs, below the first estimate's rule
+    assert h[1]["left_out"] and h[1]["identifiable"] is False and h[1]["in_refined_layout"] is False
+    assert h[1]["amplitude"] == pytest.approx(5e-5, rel=1e-9) and h[1]["phase"] == pytest.approx(1.1)
+    assert "left_out" not in h[3]
