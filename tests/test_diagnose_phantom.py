@@ -120,6 +120,10 @@ def test_parsimony_weighs_a_secondary_source_against_the_noise_floor():
                                {"lc9.T": 1.0009, "lc19.T": 0.6271}, floor={"lc9.T": 0.347, "lc19.T": 0.274})
     assert rows["lc9.T"]["secondary_closes"] < CLOSES and rows["lc9.T"]["recovered"] < 0.01
     assert why and "lc9.T" in why
+    # seed-3 c04 (a phantom idler_r1 beside an eccentric idler_u1): it takes lc9's NRMSE^2 by 0.04
+    # only, closes 22 % of the gap, and 'feedforward none' recovers 40 %: dropped
+    rows, why = parsimony_rule({"lc9.T": 0.345}, {"lc9.T": 0.401}, {"lc9.T": 0.380}, floor={"lc9.T": 0.178})
+    assert rows["lc9.T"]["recovered"] < 0.5 and why is None
     # a full set at or below the floor (the estimate's scatter): the secondary took the sensor to
     # its noise, never dropped on this ground
     rows, why = parsimony_rule({"s": 0.10}, {"s": 0.5}, {"s": 0.5}, floor={"s": 0.11})
