@@ -160,6 +160,9 @@ def _running_median(p, k):
     return np.median(win, axis=1)
 
 
+ORDER_SHOWN_Z = 9.0   # an order's z (harmonic_z) per fit run above which the data show it
+
+
 def harmonic_z(Y, freqs, floor, duration):
     """Per-harmonic statistic z_j = |Y_j|^2 T / (2 S(f_j)).
 

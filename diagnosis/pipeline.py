@@ -776,7 +776,7 @@ class Diagnosis:
                 X, misfit = est.solve_fourier(M, G, W)
                 # orders the data does not show above the noise stay out of the model
                 e_ord = np.sum(np.abs(M) ** 2, axis=0)
-                keep = np.array([d["z_order"].get(j, 0.0) > 9.0 * max(1, len(d["fits"]))
+                keep = np.array([d["z_order"].get(j, 0.0) > est.ORDER_SHOWN_Z * max(1, len(d["fits"]))
                                  or e_ord[j - 1] > 0.02 * np.sum(e_ord) for j in range(1, len(X) + 1)])
                 # ... but the report says what they were: "not in the model" is not "zero"
                 below = {j: (complex(X[j - 1]), float(d["z_order"].get(j, 0.0)))

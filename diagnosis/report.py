@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from webline.diagnosis import estimate as est
 from webline.diagnosis.structure import NOT_IDENTIFIABLE, identifiable_range
 
 SCHEMA = "webline-diagnose-1"
@@ -220,12 +221,9 @@ def _harmonics(b, X):
     return sorted(out + _left_out(b, X, {h["order"] for h in out}), key=lambda h: h["order"])
 
 
-SHOWN_Z = 9.0   # an order's z per fit run in the family screen above which the first estimate keeps it
-
-
 def _left_out(b, X, listed):
     """Orders the data show on the element's angle (the family screen's z above
-    :data:`SHOWN_Z` per fit run, the first estimate's rule) that the estimate left at zero (the time-domain fit
+    ``estimate.ORDER_SHOWN_Z`` per fit run, the first estimate's rule) that the estimate left at zero (the time-domain fit
     found them not significant against the noise near their frequency, or harmful):
     listed with the per-order gain estimate and ``identifiable: false``; "not in the
     model" is not "zero" (independent seed-2 c08: the unwind's dominant order 1, 0.053
@@ -233,11 +231,10 @@ def _left_out(b, X, listed):
     from the report)."""
     sc = b.get("score") or {}
     runs = max(1, len(sc.get("fits") or {}))
-    strong = [(int(j), float(z)) for j, z in (sc.get("z_order") or {}).items()
-              if float(z) > SHOWN_Z * runs and int(j) <= len(X) and abs(X[int(j) - 1]) == 0 and int(j) not in listed]
+    shown = [(int(j), float(z)) for j, z in (sc.get("z_order") or {}).items() if float(z) > est.ORDER_SHOWN_Z * runs]
+    strong = [(j, z) for j, z in shown if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
     if not strong or b.get("G") is None or b.get("M") is None:
         return []
-    from webline.diagnosis import estimate as est
     x_all, _ = est.solve_fourier(b["M"], b["G"], b["W"])
     return [{"order": j, "amplitude": float(abs(x_all[j - 1])), "phase": float(np.angle(x_all[j - 1])),
              "sigma": None, "identifiable": False, "in_refined_layout": False, "left_out": True,

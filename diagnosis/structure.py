@@ -320,7 +320,8 @@ def screen(d):
                    f"of {prim} (another zone's sensor): screened without it, re-estimated in each form")
     sec_fes = [fe for fe, _ in sec]
     effs_p = [e for e in effs if all(e[2] is not fe for fe in sec_fes)]
-    without = ", ".join(fe["ranked"][0]["cand"].element for fe in sec_fes)
+    sec_els = [fe["ranked"][0]["cand"].element for fe in sec_fes]
+    without = ", ".join(sec_els)
     swaps = _swaps(d, effs_p, sec) if sec_fes else []
     # every source a screened set may hold: the effects and the members tried in a primary's place
     pool = list(effs)
@@ -333,7 +334,8 @@ def screen(d):
     fit = d.fit_ctx()
     cur_sims = d.steps[-1]["sims"]
     cur_nr, cur_score = _score(d, cur_sims)
-    nom_nr, nom_score = _score(d, {c.name: c.nominal for c in fit})
+    nom_sims = {c.name: c.nominal for c in fit}
+    nom_nr, nom_score = _score(d, nom_sims)
     base_doc = d.refined_doc
     zero = base_doc
     for cand, X0, _ in effs:
@@ -380,15 +382,14 @@ def screen(d):
         form = name
         if use is not effs:
             # a swap onto a secondary source's element keeps that element: without the others
-            rest = [fe["ranked"][0]["cand"].element for fe in sec_fes
-                    if not swap or fe["ranked"][0]["cand"].element != swap[1]]
+            rest = [el for el in sec_els if not swap or el != swap[1]]
             sw = f", {swap[1]} in the place of {swap[0]}" if swap else ""
             wo = f", without {', '.join(rest)}" if rest else ""
             name = f"{name}{sw}{wo}"
             desc = f"{desc}{sw}{wo}"
         entry = {"name": name, "form": form, "description": desc, "set": sets}
         if use is not effs:
-            entry["without"] = [fe["ranked"][0]["cand"].element for fe in sec_fes]
+            entry["without"] = list(sec_els)
         if swap:
             entry["swap"] = {"replaced": swap[0], "by": swap[1]}
         d.structure["screened"].append(entry)
@@ -559,11 +560,10 @@ def screen(d):
         e_best = left_energy(best["sims"])
         ok, reason = claims.decide(cur_nr, best["nrmse"], e_cur, e_best, None, d.opt.max_worse)
         if not ok:
-            ok, reason = _trade(cur_nr, nom_nr, best["nrmse"], left_energy({c.name: c.nominal for c in fit}),
+            ok, reason = _trade(cur_nr, nom_nr, best["nrmse"], left_energy(nom_sims),
                                 e_best, reason, d.opt.max_worse)
         if ok:  # and against the layout without the effects, run by run
-            ok, reason = claims.run_by_run(fit, {c.name: c.nominal for c in fit}, best["sims"],
-                                           d.opt.max_worse, reason)
+            ok, reason = claims.run_by_run(fit, nom_sims, best["sims"], d.opt.max_worse, reason)
         best["check"] = {"accepted": ok, "reason": reason, "local_before": e_cur, "local_after": e_best}
         if ok:
             chosen = best
@@ -574,7 +574,7 @@ def screen(d):
     if sec_fes:
         chosen = _parsimony(d, chosen, [r for r in scored if "without" in r], effs, sec, e_cur, cur_nr)
     if chosen.get("swap"):
-        _take_swap(d, chosen, pool)
+        _take_swap(d, chosen)
     for r in scored:
         if r is not chosen and r is not results[0]:
             d.rejected.append({"element": r["name"], "kind": "structure", "stage": "structure screen",
@@ -798,15 +798,15 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     if without is None or not cands:
         return full
     tried = []
-    floor = {s_: claims.achievable_for(d, d.noise, d.fit_ctx(), s_) for s_ in full["nrmse"]}
+    fit = d.fit_ctx()
+    floor = {s_: claims.achievable_for(d, d.noise, fit, s_) for s_ in full["nrmse"]}
     # judged per sensor on the whole record: an order-by-order test (what the
     # secondary sources explained per harmonic) was tried and rejected the phantoms
     # of benchmark c01/c07 too, on re-estimation differences of the primary
     for r in sorted(cands, key=lambda r: r["score"]):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
         if why is None:  # no run worse than the layout without the effects
-            ok, w = claims.run_by_run(d.fit_ctx(), {c.name: c.nominal for c in d.fit_ctx()}, r["sims"],
-                                      d.opt.max_worse, None)
+            ok, w = claims.run_by_run(fit, {c.name: c.nominal for c in fit}, r["sims"], d.opt.max_worse, None)
             why = None if ok else f"{r['form']} without them {w}"
         tried.append({"name": r["name"], "score": r["score"], "sensors": rows, "accepted": why is None,
                       "reason": why})
@@ -862,7 +862,9 @@ def _swaps(d, effs_p, sec):
         n = 0
         for r in fe["ranked"][1:]:
             m = r["cand"]
-            if n >= MAX_SWAPS or m.element in here or r.get("G") is None or r.get("M") is None:
+            if n >= MAX_SWAPS:
+                break
+            if m.element in here or r.get("G") is None or r.get("M") is None:
                 continue
             if any(abs(c.freq.get(m.key, 0.0) - c.freq.get(cand.key, 0.0)) > 0.5 / c.T for c in d.fit_ctx()):
                 continue
@@ -874,7 +876,7 @@ def _swaps(d, effs_p, sec):
     return out
 
 
-def _take_swap(d, chosen, pool):
+def _take_swap(d, chosen):
     """The chosen set replaced a primary source by another member of its tie: that
     member becomes the effect's first candidate (its record and estimate), the
     replaced element a candidate behind it, and ``d.rejected`` says why."""

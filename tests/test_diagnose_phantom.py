@@ -187,7 +187,7 @@ def test_a_primary_source_is_tried_as_each_member_of_its_tie():
     chosen = {"swap": {"replaced": "idler_r1", "by": "roller19"}, "X": {"roller19": X19},
               "name": "feedforward reference, roller19 in the place of idler_r1, without idler_u1",
               "form": "feedforward reference", "check": {"reason": "one source fewer"}, "nrmse": {"lc9.T": 0.9}}
-    structure._take_swap(d, chosen, [])
+    structure._take_swap(d, chosen)
     assert fe_p["ranked"][0]["cand"] is r19 and fe_p["ranked"][1]["cand"] is r1
     assert fe_p["ranked"][0]["X"] is X19 and fe_p["structure"] == "feedforward reference"
     assert d.rejected[0]["element"] == "idler_r1" and "roller19" in d.rejected[0]["reason"]
