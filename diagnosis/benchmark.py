@@ -32,8 +32,9 @@ Scorer
 (element, kind): an exact element match, or - when the true element is
 physically indistinguishable from the reported one (same kind, equal radius,
 same tension zone: it turns at the same speed and loads the same sensors) and
-the report lists it among the ``candidates`` - an "ambiguous" match, counted
-but reported separately. :func:`summarize` aggregates precision / recall per
+the report lists it in its ``tie`` (the candidates whose pattern across the
+sensors fits as well; ``candidates`` in reports without one) - an "ambiguous"
+match, counted but reported separately. :func:`summarize` aggregates precision / recall per
 kind, the error of the fundamental frequency, false effects on noise-only
 cases, in-sample and held-out gap shrinkage (NRMSE refined / nominal) and run
 time; :func:`markdown` renders the table.
@@ -594,7 +595,9 @@ def score_case(truth, report):
                 if mode == "exact":
                     ok = r.get("element") == t["element"]
                 else:
-                    ok = (t["element"] in _cands(r) and r.get("element") in t.get("indistinguishable", [t["element"]]))
+                    # the report's tie when it gives one (the candidates its pattern does not exclude)
+                    ok = (t["element"] in (r.get("tie") or _cands(r))
+                          and r.get("element") in t.get("indistinguishable", [t["element"]]))
                 if ok:
                     used_t.add(ti)
                     used_r.add(ri)

@@ -161,6 +161,14 @@ def _running_median(p, k):
 
 
 ORDER_SHOWN_Z = 9.0   # an order's z (harmonic_z) per fit run above which the data show it
+TIE_MISFIT = 0.02     # pattern misfits closer than this: the sensors do not tell the elements apart
+
+
+def tied(ranked):
+    """The candidates (dicts with ``misfit``, best first) whose pattern across the
+    sensors fits as well as the first one's: the first one included."""
+    m0 = ranked[0]["misfit"]
+    return [r for r in ranked if abs(r["misfit"] - m0) < TIE_MISFIT]
 
 
 def harmonic_z(Y, freqs, floor, duration):

@@ -884,7 +884,7 @@ class Diagnosis:
         """Candidates whose patterns fit equally well (one load cell: all exactly) are
         told apart by simulation: each with its estimated eccentricity, the one whose
         whole record (transients included) is closest to the data goes first."""
-        tied = [r for r in ranked if r["misfit"] - ranked[0]["misfit"] < 0.02]
+        tied = est.tied(ranked)
         if len(tied) < 2:
             return
         jobs, keys = [], []

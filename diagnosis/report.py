@@ -150,6 +150,8 @@ def _effects(d):
             "component": k.component,
             "kind": k.kind,
             "candidates": [_cand_entry(d, r) for r in ranked],
+            # the candidates the sensors cannot tell from the first: the report names them all
+            "tie": [r["cand"].element for r in est.tied(ranked)],
             "fundamental_hz": float(np.mean(fund_fit)) if fund_fit else None,
             "fundamental_by_run_hz": fund,
             "speed_scale_by_run": {c.name: c.kappa.get(k.key, 0.0) for c in fit},
@@ -261,32 +263,41 @@ def _confidence(d, ranked):
     """Confidence in [0, 1]: significance x uniqueness among the candidates.
 
     Significance saturates 6 decades beyond the threshold. Uniqueness is 1 for
-    a single candidate, else the relative gap between the best and the second
-    pattern misfit (1/n when the sensors cannot tell them apart)."""
+    a single candidate; among candidates whose patterns the sensors cannot tell
+    apart (:func:`diagnosis.estimate.tied`) it is 1/n, raised by how much less
+    residual the first one leaves when each is simulated with its estimate;
+    otherwise the relative gap between the best and the second pattern misfit."""
     b = ranked[0]
     thr = d.opt.significance
     sig = float(np.clip((thr - b["score"]["logp"]) / 6.0, 0.0, 1.0))
     sig = 0.5 + 0.5 * sig
+    tie = est.tied(ranked)
     if len(ranked) == 1:
         uniq, why = 1.0, "single consistent element"
+    elif len(tie) > 1:
+        n = len(tie)
+        # the tie's own simulations: the harmonic check's residual energy, or the time-domain fit's
+        key = "verify" if all(r.get("verify") is not None for r in tie[:2]) else "td_sse"
+        v1, v2 = tie[0].get(key), tie[1].get(key)
+        names = ", ".join(r["cand"].element for r in tie)
+        why = f"{n} elements turn at the same frequency and the sensors do not tell their patterns apart ({names})"
+        if v1 is not None and v2 is not None and v2 > 0 and math.isfinite(v2):
+            gain = float(np.clip(1.0 - v1 / v2, 0.0, 1.0))
+            uniq = 1.0 / n + (1.0 - 1.0 / n) * min(1.0, gain / 0.5)
+            why += (f"; simulated with its estimate, {tie[0]['cand'].element} leaves {100 * gain:.0f} % less "
+                    f"residual than {tie[1]['cand'].element}")
+        else:
+            uniq = 1.0 / n
+        out = [r for r in ranked if all(r is not t for t in tie)]
+        if out:
+            why += (f"; {', '.join(r['cand'].element for r in out)} excluded by the pattern "
+                    f"(misfit {min(r['misfit'] for r in out):.3f} vs {b['misfit']:.3f})")
     else:
         m1, m2 = ranked[0]["misfit"], ranked[1]["misfit"]
-        v1, v2 = ranked[0].get("verify"), ranked[1].get("verify")
-        if m2 - m1 < 0.02 and v1 is not None and v2 is not None and v2 > 0 and math.isfinite(v2):
-            gain = float(np.clip(1.0 - v1 / v2, 0.0, 1.0))
-            uniq = 1.0 / len(ranked) + (1.0 - 1.0 / len(ranked)) * min(1.0, gain / 0.5)
-            why = (f"{len(ranked)} elements turn at the same frequency and fit the sensors' harmonics "
-                   f"equally; simulated with its estimate, {ranked[0]['cand'].element} leaves "
-                   f"{100 * gain:.0f} % less residual energy than {ranked[1]['cand'].element}")
-        elif m2 - m1 < 0.02:
-            uniq = 1.0 / len(ranked)
-            why = (f"{len(ranked)} elements turn at the same frequency and the sensors do not "
-                   f"tell their patterns apart")
-        else:
-            uniq = float(np.clip((m2 - m1) / max(m2, 1e-9), 0.0, 1.0))
-            uniq = max(uniq, 1.0 / len(ranked))
-            why = (f"{len(ranked)} elements consistent in frequency; ranked by the pattern across "
-                   f"sensors (misfit {m1:.3f} vs {m2:.3f})")
+        uniq = float(np.clip((m2 - m1) / max(m2, 1e-9), 0.0, 1.0))
+        uniq = max(uniq, 1.0 / len(ranked))
+        why = (f"{len(ranked)} elements consistent in frequency; ranked by the pattern across "
+               f"sensors (misfit {m1:.3f} vs {m2:.3f})")
     return float(sig * uniq), why
 
 
@@ -458,7 +469,12 @@ def _verdict(rep):
         return "no unmodelled effect found: the residual is noise at the level the data can resolve." + extra
     parts = []
     for e in effs:
-        c = ", ".join(x["element"] for x in e["candidates"]) if len(e.get("candidates", [])) > 1 else e["element"]
+        # a periodic effect names the elements the sensors cannot tell apart, not the
+        # ones its pattern excludes; the others (compliance, ...) their candidates
+        if e.get("tie"):
+            c = " or ".join(e["tie"])
+        else:
+            c = ", ".join(x["element"] for x in e["candidates"]) if len(e.get("candidates", [])) > 1 else e["element"]
         f = e.get("fundamental_hz")
         parts.append(f"{e['kind']} of {c}" + (f" (f = {f:.3g} Hz)" if f else "")
                      + f", explains {100 * e['explained_share']:.0f} % of the "
@@ -557,14 +573,17 @@ def html_report(d, rep):
                      "<th>f (Hz)</th><th>share</th><th>confidence</th><th>C<sub>j</sub> (&micro;m; in brackets: over lines "
                      "within the data sheet's tolerances; ?: not identifiable)</th></tr>")
         for i, ef in enumerate(rep["effects"], 1):
-            cands = ", ".join(f"{c['element']} (misfit {_fmt(c.get('pattern_misfit'))})" for c in ef.get("candidates", []))
+            # the tie (the sensors cannot tell these apart) in bold
+            tie = set(ef.get("tie") or []) if len(ef.get("tie") or []) > 1 else set()
+            cands = ", ".join((f"<b>{e(c['element'])}</b>" if c["element"] in tie else e(c["element"]))
+                              + f" (misfit {_fmt(c.get('pattern_misfit'))})" for c in ef.get("candidates", []))
             C = ", ".join(f"{1e6 * h['amplitude']:.1f}"
                           + (" ({:.1f}-{:.1f})".format(*(1e6 * x for x in h["range_over_lines"]))
                              if h.get("range_over_lines") else "")
                           + ("?" if h.get("identifiable") is False else "")
                           for h in ef.get("harmonics", []))
             parts.append(f"<tr><td>{i}</td><td class=l>{e(ef['element'])}</td><td class=l>{e(ef['kind'])}</td>"
-                         f"<td class=l>{e(cands)}</td><td>{_fmt(ef.get('fundamental_hz'))}</td>"
+                         f"<td class=l>{cands}</td><td>{_fmt(ef.get('fundamental_hz'))}</td>"
                          f"<td>{_fmt(100 * ef['explained_share'], 3)} %</td><td>{_fmt(ef['confidence'], 2)}</td>"
                          f"<td class=l>{e(C)}</td></tr>")
         parts.append("</table>")

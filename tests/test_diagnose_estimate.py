@@ -96,3 +96,32 @@ def test_projected_energy_equals_the_least_squares_fit():
     assert est.projected_energy(A, Y) == pytest.approx(float(np.sum((A @ coef) ** 2)), rel=1e-10)
     # a signal in the span of the basis is explained entirely
     assert est.projected_energy(A, inside) == pytest.approx(float(np.sum(inside ** 2)), rel=1e-10)
+
+
+def test_a_tie_is_the_candidates_the_sensors_cannot_tell_apart_not_every_candidate():
+    """Seed-3 c07 of the independent family: four idlers of one radius, two per
+    tension zone. The pattern across the two load cells excludes the other zone
+    (misfit 0.92 against 0.08); inside the zone it cannot choose (0.078 vs 0.083).
+    The report names the two, and its confidence is one in two, not one in four."""
+    from types import SimpleNamespace
+
+    from webline.diagnosis import report
+
+    def cand(el, misfit, td):
+        return {"cand": SimpleNamespace(element=el), "misfit": misfit, "td_sse": td,
+                "score": {"logp": -8341.0}}
+
+    ranked = [cand("idler_u1", 0.0781, 0.5125), cand("roller9", 0.0829, 0.5186),
+              cand("idler_r1", 0.9180, 0.9585), cand("roller19", 0.9181, 0.9586)]
+    assert [r["cand"].element for r in est.tied(ranked)] == ["idler_u1", "roller9"]
+    d = SimpleNamespace(opt=SimpleNamespace(significance=-6.0))
+    conf, why = report._confidence(d, ranked)
+    # 1/2 raised by the 1.2 % less residual the first leaves: (1 - 0.5125/0.5186) / 0.5 * 1/2
+    gain = 1.0 - 0.5125 / 0.5186
+    assert conf == pytest.approx(0.5 + 0.5 * gain / 0.5, rel=1e-9)
+    assert "(idler_u1, roller9)" in why and "idler_r1, roller19 excluded by the pattern" in why
+    # one candidate clearly ahead: no tie, the misfit gap sets the uniqueness
+    ranked2 = [cand("idler_u1", 0.078, None), cand("idler_r1", 0.918, None)]
+    assert len(est.tied(ranked2)) == 1
+    conf2, _ = report._confidence(d, ranked2)
+    assert conf2 == pytest.approx(1.0 - 0.078 / 0.918, rel=1e-9)

@@ -191,6 +191,10 @@ def test_scorer_counts_on_hand_made_reports():
     # ... but not listed among the candidates: no match
     sc = B.score_case(t, {"effects": [_eff("roller9", "eccentricity", ["roller9"], f=5.0)]})
     assert sc["matches"] == [] and len(sc["false"]) == 1 and len(sc["missed"]) == 1
+    # ... or a candidate the report's own pattern excludes (not in its tie): no match
+    sc = B.score_case(t, {"effects": [dict(_eff("roller9", "eccentricity", ["roller9", "idler_u1"], f=5.0),
+                                           tie=["roller9"])]})
+    assert sc["matches"] == [] and len(sc["false"]) == 1 and len(sc["missed"]) == 1
     # listed, but physically distinguishable (another radius): no match
     t2 = _truth([("guide_in", "eccentricity")])
     sc = B.score_case(t2, {"effects": [_eff("roller9", "eccentricity", ["roller9", "guide_in"], f=5.0)]})
