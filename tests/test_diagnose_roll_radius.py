@@ -85,3 +85,33 @@ def test_pulse_angle_also_sets_the_run_radius_the_model_turns_with(tmp_path):
     # the prediction carries: the held-out run's load cells come closer to the data
     for s, v in rep["holdout"]["out_of_sample"].items():
         assert v["refined"]["nrmse"] < v["nominal"]["nrmse"], s
+
+
+def test_a_speed_scale_beyond_the_search_range_is_found_by_widening_it_once():
+    """Seed-4 c02 of the independent family: the unwind turned 2.2 % faster than
+    its written radius says. Searched over +-2 %, the scale stopped at the bound
+    and the order-5 line drifted by a radian over the record; a best scale at an
+    end of the range searches once more over twice the range. Synthetic: order 5
+    of a 1.03 Hz roll, 60 s at 250 Hz, the line at a speed 2.22 % above the model's,
+    noise 3 x the line (the projected energy peaks within a grid step of the truth)."""
+    import functools
+    import math
+    from types import SimpleNamespace
+
+    from webline.diagnosis.pipeline import Diagnosis
+
+    fs, f0, kap_true = 250.0, 1.03, 0.0222
+    t = np.arange(0.0, 60.0, 1.0 / fs)
+    th = 2 * math.pi * f0 * t
+    ref = 0.5 * (th[0] + th[-1])
+    y = 0.3 * np.cos(5 * ((1 + kap_true) * (th - ref) + ref) + 0.3)
+    y = y + np.random.default_rng(3).normal(0.0, 1.0, t.size)
+    c = SimpleNamespace(fs=fs, mask=np.ones(t.size, bool), periodic={"lc9.T": y}, sensors=["lc9.T"],
+                        theta={"k": th}, freq={"k": f0})
+    d = SimpleNamespace(opt=SimpleNamespace(kappa_span=0.02), orders_for=lambda c, key: [1, 2, 3, 4, 5, 6])
+    d._refine_kappa_joint = functools.partial(Diagnosis._refine_kappa_joint, d)
+    k = SimpleNamespace(key="k")
+    # the grid's step: a quarter of a cycle of order 6 over the record
+    step = 0.25 / (6 * f0 * 60.0)
+    assert d._refine_kappa_joint([c], k) == pytest.approx(0.02, abs=1e-12)   # held at the bound
+    assert d._refine_kappa_joint([c], k, extend=True) == pytest.approx(kap_true, abs=step)
