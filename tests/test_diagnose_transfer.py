@@ -254,3 +254,33 @@ def test_a_range_wider_than_a_factor_2_is_not_identifiable():
     h1, h2 = report._harmonic_entry(b, X, 0), report._harmonic_entry(b, X, 1)
     assert h1["identifiable"] is True and h1["range_over_lines"] == [0.8e-4, 1.3e-4]
     assert h2["identifiable"] is False and "factor 2" in h2["identifiable_basis"]
+
+
+def test_a_ramped_held_out_run_is_judged_window_by_window():
+    """Seed-4 c22: the held-out run holds 200, 160 and 200 ft/min. Over the whole
+    run order 3 of the guide roller sat at 16.1 Hz on average; in the 160 ft/min
+    window it sat at 13.9 Hz on a mode of the model. Each steady window is its own
+    held-out 'run', with its own frequency and duration; a steady run stays whole."""
+    import functools
+    from types import SimpleNamespace
+
+    from webline.diagnosis import transfer
+    from webline.diagnosis.pipeline import Diagnosis
+
+    fs = 100.0
+    t = np.arange(0.0, 60.0, 1.0 / fs)
+    speed = np.where((t > 18) & (t < 39), 0.8, 1.0)           # 200 -> 160 -> 200 ft/min, as a ratio
+    th = 2 * np.pi * 5.79 * np.cumsum(speed) / fs               # the roller's angle
+    steady = ~(((t > 15) & (t < 21)) | ((t > 36) & (t < 42))) & (t > 1)
+    c = SimpleNamespace(name="run2", fit=False, sensors=["lc9.T"], fs=fs, t=t, mask=steady,
+                        theta={"g": th}, freq={"g": 5.4})
+    d = SimpleNamespace(_mask_pieces=Diagnosis._mask_pieces)
+    d._mean_freq = functools.partial(Diagnosis._mean_freq, d)
+    w = transfer.windows(d, [c])
+    assert [x.name for x in w] == ["run2 1-15 s", "run2 21-36 s", "run2 42-60 s"]
+    assert [x.freq["g"] for x in w] == pytest.approx([5.79, 0.8 * 5.79, 5.79], rel=1e-3)
+    assert sum(x.T for x in w) == pytest.approx(steady.sum() / fs)
+    assert all(x.run_name == "run2" and not x.fit for x in w)
+    # a steady held-out run is judged whole
+    c2 = SimpleNamespace(**{**vars(c), "mask": t > 1})
+    assert transfer.windows(d, [c2]) == [c2]
