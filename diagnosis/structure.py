@@ -273,6 +273,21 @@ def _stack(d, cand, fn):
 
 
 TRADE = 3.0   # NRMSE^2 a form must win on some sensors for each unit it gives up on others
+TRADE_MIN = 0.01   # ... and a form that gives up anything on a sensor must lower the sum of NRMSE^2 by this share
+
+
+def _small_trade(cur_nr, cur_score, nr, score):
+    """Why a form that raises some sensor's NRMSE at all is refused, or None: it must
+    lower the sum of NRMSE^2 by :data:`TRADE_MIN`; less is a choice the data do not
+    make (independent seed-4 c08: "feedforward reference" for the truth's none, sum
+    2.0289 -> 2.0203, lc19 1.0046 -> 0.9989 for lc9 1.0098 -> 1.0112; the form
+    "none" fitted to 2.0217)."""
+    up = [s for s in cur_nr if s in nr and nr[s] > cur_nr[s] * (1.0 + 1e-9)]
+    gain = (cur_score - score) / cur_score if cur_score > 0 else 0.0
+    if not up or gain >= TRADE_MIN:
+        return None
+    return (f"raises {', '.join(f'{s} {cur_nr[s]:.4g} -> {nr[s]:.4g}' for s in up)} for a sum of NRMSE^2 "
+            f"{100 * gain:.2g} % lower (a form that gives up anything needs {100 * TRADE_MIN:g} %)")
 
 
 def _trade(cur_nr, nom_nr, nr, e_nom, e_form, why_not, max_worse):
@@ -562,6 +577,9 @@ def screen(d):
         if not ok:
             ok, reason = _trade(cur_nr, nom_nr, best["nrmse"], left_energy(nom_sims),
                                 e_best, reason, d.opt.max_worse)
+        if ok:
+            small = _small_trade(cur_nr, cur_score, best["nrmse"], best["score"])
+            ok, reason = (False, small) if small else (ok, reason)
         if ok:  # and against the layout without the effects, run by run
             ok, reason = claims.run_by_run(fit, nom_sims, best["sims"], d.opt.max_worse, reason)
         best["check"] = {"accepted": ok, "reason": reason, "local_before": e_cur, "local_after": e_best}
