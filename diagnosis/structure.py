@@ -89,6 +89,84 @@ def alternatives(d):
     return out
 
 
+SHAFT_RATIOS = (0.6, 0.8, 1.0, 1.25)   # shaft forms: torsional mode / the first effect's fundamental
+SHAFT_MARGIN = 0.1   # a shaft form's sum of NRMSE^2 below the best rigid form's with the same sources, at least
+
+
+def _shaft_clears(entries, shafts):
+    """``entries`` (screened results with the same sources) without the shaft forms
+    that do not fit :data:`SHAFT_MARGIN` better than the best rigid form among them
+    (its simulated score, else its predicted one): a shaft is a drive effect the
+    report claims, and a form that only tweaks the transfer a little is not one."""
+    def sc(r):
+        return r.get("score", r.get("predicted_score", math.inf))
+    rigid = min((sc(r) for r in entries if r.get("form") not in shafts), default=math.inf)
+    return [r for r in entries if r.get("form") not in shafts or sc(r) <= (1.0 - SHAFT_MARGIN) * rigid]
+
+
+def shaft_forms(d, effs):
+    """Compliant drive shafts on the driven rollers (not the rolls: those sit at the
+    line's ends), as model forms: [(name, description, sets, (element, f_t))]. A
+    shaft whose mode sits near a periodic effect's line changes how the line passes
+    from one tension zone to the other (independent seed-4 c05: an eccentric idler_u1
+    at 4.75 Hz and the S-wrap leader's shaft at 4.04 Hz; with rigid drives a phantom
+    roller19 carried the line to lc19, and with the truth's shaft in the layout the
+    diagnosis reports the idler alone). The modes sit on :data:`SHAFT_RATIOS` x the
+    first effect's fundamental in the first fit run that holds it; 5 % damping and 30 %
+    of the inertia on the motor side, as :func:`diagnosis.others._drive_doc`."""
+    from webline.diagnosis import others
+    if not effs:
+        return []
+    cand = effs[0][0]
+    c0 = next((c for c in d.fit_ctx() if d.orders_for(c, cand.key)), None)
+    f = c0.freq.get(cand.key, 0.0) * (1.0 + c0.kappa.get(cand.key, 0.0)) if c0 is not None else 0.0
+    if f <= 0:
+        return []
+    out = []
+    for spec in others.drive_candidates(d):
+        if spec[2][0] != "inertia":
+            continue
+        for r in SHAFT_RATIOS:
+            ft = r * f
+            sets = others._drive_doc({"base": "", "set": {}}, spec, ft, 0.0)["set"]
+            out.append((f"shaft on {spec[0]} at {ft:.3g} Hz",
+                        f"a compliant drive shaft on {spec[0]}, torsional mode {ft:.3g} Hz (5 % damping)",
+                        dict(sets), (spec[0], ft)))
+    return out
+
+
+def _shaft_effect(d, chosen, shaft, scored, cur_score):
+    """The compliance a chosen shaft form claims, as an effect of the report (the
+    others' record shape); its confidence: how much better it fits than the best
+    rigid form simulated (or the layout's own)."""
+    el, ft = shaft
+    rigid = [r["score"] for r in scored if not r.get("form", r["name"]).startswith("shaft on")
+             and ("without" in r) == ("without" in chosen)]
+    nxt = min(rigid) if rigid else cur_score
+    same = sorted({r["form"] for r in scored if r.get("form", "").startswith("shaft on") and r["form"] != chosen["form"]
+                   and r["score"] <= chosen["score"] + AS_WELL * max(cur_score - chosen["score"], 1e-12)})
+    gain = (cur_score - chosen["score"]) / cur_score if cur_score > 0 else 0.0
+    return {
+        "element": el, "kind": "compliance",
+        "candidates": [{"element": el, "kind": "compliance", "explained_share": gain}],
+        "fundamental_hz": ft,
+        "harmonics": [],
+        "explained_share": gain,
+        "explains_what": "sum of the load cells' NRMSE^2 over the fit runs (as a model form, with the effects)",
+        "confidence": float(np.clip(1.0 - chosen["score"] / nxt, 0.0, 1.0)) if nxt > 0 else 0.0,
+        "confidence_basis": (f"a compliant shaft on {el}'s drive (torsional mode {ft:.3g} Hz, a grid of "
+                             f"{', '.join(f'{x:g}' for x in SHAFT_RATIOS)} x the first effect's fundamental) "
+                             f"carries the periodic effects' lines between the tension zones as the data do: "
+                             f"sum of NRMSE^2 {chosen['score']:.4g}, best rigid form {nxt:.4g}, layout's form "
+                             f"{cur_score:.4g}" + (f"; {', '.join(same)} fit about as well" if same else "")),
+        "parameters": {"torsional_frequency": {"estimated": ft, "unit": "Hz"},
+                       "damping_ratio": {"estimated": 0.05, "unit": "1"}},
+        "detail": f"{el} compliance, torsional mode {ft:.3g} Hz (a model form of the structure screen)",
+        "check": chosen.get("check"),
+        "model_form": chosen["name"],
+    }
+
+
 def _apply(doc, sets):
     doc = copy.deepcopy(doc)
     doc.setdefault("set", {}).update(sets)
@@ -485,6 +563,10 @@ def screen(d):
                  cur_score)
 
     alts = alternatives(d)[:max(0, d.opt.max_structures)]
+    # shafts on the driven rollers: a form of the line's transfer between the zones
+    sf = shaft_forms(d, [e for e in effs if e[2] is not None])
+    shafts = {name: sh for name, _, _, sh in sf}
+    alts += [(name, desc, sets) for name, desc, sets, _ in sf]
     # the full set is screened in the other forms too: a second source's amplitude is
     # what the layout's form needs to carry the first source's lines to the other zone,
     # and in the line's form it can be a tenth of that (independent c05: 0.88 mm for 0.076)
@@ -512,9 +594,13 @@ def screen(d):
     # stage B, the two best predicted (of the full set and of the set without the
     # secondary sources): simulate with X1 and one Gauss-Newton step
     stage_a.sort(key=lambda x: x[0]["predicted_score"])
-    full_a = [x for x in stage_a if "without" not in x[0]]
-    pars_a = [x for x in stage_a if "without" in x[0]]
+    # the shaft forms apart: the best of them is simulated too, never in a rigid form's place
+    # (a shaft must beat the rigid forms simulated, SHAFT_MARGIN)
+    full_a = [x for x in stage_a if "without" not in x[0] and x[0]["form"] not in shafts]
+    pars_a = [x for x in stage_a if "without" in x[0] and x[0]["form"] not in shafts]
     to_b = full_a[:2] + pars_a[:2]
+    to_b += [x for x in stage_a if "without" not in x[0] and x[0]["form"] in shafts][:1]
+    to_b += [x for x in stage_a if "without" in x[0] and x[0]["form"] in shafts][:1]
     # the best predicted swap too: a swap is another hypothesis, not a variant of the forms
     to_b += [x for x in pars_a if "swap" in x[0]][:1]
     to_b = [x for i, x in enumerate(to_b) if all(x is not y for y in to_b[:i])]
@@ -568,7 +654,14 @@ def screen(d):
                                      f"two best ({', '.join(x[0]['name'] for x in to_b)})",
                            "predicted_nrmse": entry["predicted_nrmse"]})
     scored = [r for r in results if "score" in r]
-    full_scored = [r for r in scored if "without" not in r]
+    # a shaft form competes with the rigid forms holding the same sources, simulated or predicted
+    same = {}
+    for r in results + [x[0] for x in not_b]:
+        sw = r.get("swap") or {}
+        same.setdefault(("without" in r, sw.get("replaced"), sw.get("by")), []).append(r)
+    cleared = [r for grp in same.values() for r in _shaft_clears(grp, shafts)]
+    pars_ok = [r for r in cleared if "without" in r]
+    full_scored = [r for r in cleared if "without" not in r and "score" in r]
     best = min(full_scored, key=lambda r: r["score"])
     chosen = results[0]
     if best is not results[0]:
@@ -590,7 +683,8 @@ def screen(d):
                                "reason": reason, "nrmse_before": cur_nr, "nrmse_after": best["nrmse"],
                                "local_before": e_cur, "local_after": e_best})
     if sec_fes:
-        chosen = _parsimony(d, chosen, [r for r in scored if "without" in r], effs, sec, e_cur, cur_nr)
+        chosen = _parsimony(d, chosen, [r for r in scored if "without" in r and any(r is x for x in pars_ok)],
+                            effs, sec, e_cur, cur_nr)
     if chosen.get("swap"):
         _take_swap(d, chosen)
     for r in scored:
@@ -653,6 +747,9 @@ def screen(d):
                 f"{1e6 * hi:.0f} um; a run at another line speed (the forms' gains differ most at the "
                 f"effect's frequency) or with a tension set-point step would tell them apart")
             d.notes.append(unc[cand.element]["note"])
+    if chosen is not results[0] and chosen.get("form") in shafts:
+        d.other = list(getattr(d, "other", []) or []) + [
+            _shaft_effect(d, chosen, shafts[chosen["form"]], scored, cur_score)]
     d.structure["chosen"] = chosen.get("form", chosen["name"])
     if chosen.get("without"):
         d.structure["without"] = chosen["without"]
