@@ -125,3 +125,22 @@ def test_a_tie_is_the_candidates_the_sensors_cannot_tell_apart_not_every_candida
     assert len(est.tied(ranked2)) == 1
     conf2, _ = report._confidence(d, ranked2)
     assert conf2 == pytest.approx(1.0 - 0.078 / 0.918, rel=1e-9)
+
+
+def test_an_order_the_forms_disagree_on_is_flagged_not_identifiable():
+    """Seed-4 c05: the S-wrap leader's order 1 needs 0.026 mm with a shaft on its drive
+    and 0.215 mm in the rigid forms that fit about as well (0.213 mm true); the lines
+    around the chosen form alone said 0.017-0.031 mm. Each order is flagged by the
+    forms' range, not only the dominant one; an order they agree on is left alone."""
+    from webline.diagnosis import report
+
+    eff = {"harmonics": [{"order": 1, "amplitude": 2.6e-5, "identifiable": True},
+                         {"order": 3, "amplitude": 1.79e-4, "identifiable": True},
+                         {"order": 4, "amplitude": 6.2e-5, "left_out": True, "identifiable": False}],
+           "amplitude_uncertainty": {"range_by_order": [[1.4e-5, 2.15e-4], [0.0, 0.0],
+                                                        [9.85e-5, 1.83e-4], [2.4e-5, 2.2e-4]]}}
+    report._forms_flag(eff)
+    h1, h3, h4 = eff["harmonics"]
+    assert h1["identifiable"] is False and "14-215 um" in h1["identifiable_basis"]
+    assert h3["identifiable"] is True          # 1.86 x: within a factor 2
+    assert "identifiable_basis" not in h4      # already flagged by its own rule
