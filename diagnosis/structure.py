@@ -135,15 +135,15 @@ def shaft_forms(d, effs):
     return out
 
 
-def _shaft_effect(d, chosen, shaft, scored, cur_score):
-    """The compliance a chosen shaft form claims, as an effect of the report (the
-    others' record shape); its confidence: how much better it fits than the best
-    rigid form simulated (or the layout's own)."""
-    el, ft = shaft
-    rigid = [r["score"] for r in scored if not r.get("form", r["name"]).startswith("shaft on")
-             and ("without" in r) == ("without" in chosen)]
+def _shaft_effect(chosen, shafts, scored, cur_score):
+    """The compliance a chosen shaft form (``shafts``: form name -> (element, f_t))
+    claims, as an effect of the report (the others' record shape); its confidence:
+    how much better it fits than the best rigid form simulated with as many sources
+    (or the layout's own)."""
+    el, ft = shafts[chosen["form"]]
+    rigid = [r["score"] for r in scored if r.get("form") not in shafts and ("without" in r) == ("without" in chosen)]
     nxt = min(rigid) if rigid else cur_score
-    same = sorted({r["form"] for r in scored if r.get("form", "").startswith("shaft on") and r["form"] != chosen["form"]
+    same = sorted({r["form"] for r in scored if r.get("form") in shafts and r["form"] != chosen["form"]
                    and r["score"] <= chosen["score"] + AS_WELL * max(cur_score - chosen["score"], 1e-12)})
     gain = (cur_score - chosen["score"]) / cur_score if cur_score > 0 else 0.0
     return {
@@ -749,7 +749,7 @@ def screen(d):
             d.notes.append(unc[cand.element]["note"])
     if chosen is not results[0] and chosen.get("form") in shafts:
         d.other = list(getattr(d, "other", []) or []) + [
-            _shaft_effect(d, chosen, shafts[chosen["form"]], scored, cur_score)]
+            _shaft_effect(chosen, shafts, scored, cur_score)]
     d.structure["chosen"] = chosen.get("form", chosen["name"])
     if chosen.get("without"):
         d.structure["without"] = chosen["without"]
