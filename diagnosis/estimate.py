@@ -181,6 +181,27 @@ def harmonic_z(Y, freqs, floor, duration):
     return np.abs(np.asarray(Y)) ** 2 * duration / (2.0 * S)
 
 
+def coherence_debiased(Ys, v):
+    """Phase stability per order of phasors ``Ys`` (K segments x orders) fitted
+    on consecutive segments, each carrying white noise of expected ``|Y|^2 = v``
+    (per order; ``2 S / T_seg``, :func:`harmonic_z`).
+
+    A steady line Y plus noise gives E|sum Y_k|^2 = K^2 |Y|^2 + K v and
+    E sum |Y_k|^2 = K |Y|^2 + K v; the raw ratio |sum Y_k|^2 / (K sum |Y_k|^2)
+    reads (K r + 1) / (K r + K) at segment SNR r = |Y|^2 / v, so a weak steady
+    line looks half incoherent. Subtracting the noise's share from both sums
+    gives 1 for a steady line at any SNR; noise alone and a transient that
+    fills one segment stay low. Clipped to [0, 1]; an order whose segments
+    carry no more than their noise reads 0."""
+    Ys = np.asarray(Ys, complex)
+    K = Ys.shape[0]
+    v = np.broadcast_to(np.asarray(v, float), Ys.shape[1:])
+    num = np.abs(Ys.sum(axis=0)) ** 2 - K * v
+    den = K * (np.sum(np.abs(Ys) ** 2, axis=0) - K * v)
+    out = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    return np.clip(out, 0.0, 1.0)
+
+
 def gamma_log10_sf(z_sum, shape):
     """log10 of the probability that noise alone gives a summed z above ``z_sum``."""
     if shape <= 0:

@@ -80,6 +80,9 @@ def test_a_shaft_rung_by_the_drive_ripple_is_found_on_data_we_did_not_make(tmp_p
     assert all(chk["nrmse_after"][s] <= 1.02 * chk["nrmse_before"][s] for s in chk["nrmse_before"])
     assert any(f["kind"] == "drive shaft mode" for f in rep["findings"])
     assert "compliance of sw_leader" in rep["verdict"]
+    # rung by its own drive: that drive carries most of the ripple fitted in the band
+    rec = next(r for r in rep["compliance"] if r["claimed"] == "sw_leader")
+    assert rec["tried"][0]["element"] == "sw_leader" and rec["tried"][0]["own_share"] >= compliance.OWN_MIN
 
 
 def test_no_shaft_is_claimed_for_a_rigid_line_whose_mode_the_model_places_wrong(tmp_path):

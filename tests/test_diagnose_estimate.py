@@ -144,3 +144,30 @@ def test_an_order_the_forms_disagree_on_is_flagged_not_identifiable():
     assert h1["identifiable"] is False and "14-215 um" in h1["identifiable_basis"]
     assert h3["identifiable"] is True          # 1.86 x: within a factor 2
     assert "identifiable_basis" not in h4      # already flagged by its own rule
+
+
+def test_coherence_debiased_reads_a_weak_steady_line_as_steady_and_noise_or_a_transient_as_not():
+    """Segment SNR 1 at K = 4: the raw ratio reads about (K r + 1)/(K r + K) = 0.625
+    (0.60 as a mean of single draws), below the screen's 0.75 for a perfectly steady
+    line; with the noise's share taken out the ratio of the sums is 1 and single
+    draws (clipped at 1) average about 0.76. Noise alone and a burst in one segment
+    stay low (a burst: 1/K). Margins: 4000 draws put the means within 0.01."""
+    rng = np.random.default_rng(3)
+    K, n, v = 4, 4000, 1.0
+    def noise(shape):
+        return (rng.normal(size=shape) + 1j * rng.normal(size=shape)) * math.sqrt(v / 2)
+    Y = np.exp(0.7j) * math.sqrt(v)                       # |Y|^2 = v: segment SNR 1
+    steady = Y + noise((n, K, 1))
+    raw = [np.abs(s.sum(0)) ** 2 / (K * np.sum(np.abs(s) ** 2, 0)) for s in steady]
+    deb = [est.coherence_debiased(s, v) for s in steady]
+    assert np.mean(raw) < 0.66
+    # the debiased ratio of sums is unbiased; clipping at 1 pulls the mean of single draws down
+    num = np.mean([np.abs(s.sum(0)) ** 2 - K * v for s in steady])
+    den = np.mean([K * (np.sum(np.abs(s) ** 2, 0) - K * v) for s in steady])
+    assert abs(num / den - 1.0) < 0.05
+    assert np.mean(deb) > np.mean(raw) + 0.1
+    pure = [est.coherence_debiased(noise((K, 1)), v) for _ in range(n)]
+    assert np.mean(pure) < 0.3
+    burst = np.zeros((K, 1), complex)
+    burst[1, 0] = 30.0
+    assert abs(float(est.coherence_debiased(burst + noise((K, 1)), v)[0]) - 1 / K) < 0.05
