@@ -181,6 +181,22 @@ def harmonic_z(Y, freqs, floor, duration):
     return np.abs(np.asarray(Y)) ** 2 * duration / (2.0 * S)
 
 
+def fit_harmonics_joint(y, families):
+    """Least-squares complex amplitudes of the first of ``families`` [(theta, orders),
+    ...] fitted together with the others on ``y``: the others' lines take their own
+    share where the bases are not orthogonal (a short segment, lines a fraction
+    of a hertz apart)."""
+    if len(families) == 1:
+        return fit_harmonics(y, *families[0])
+    A = np.hstack([harmonic_basis(th, o) for th, o in families])
+    n0 = 2 * len(families[0][1])
+    if len(y) < A.shape[1] + 2:
+        return np.zeros(len(families[0][1]), complex)
+    coef, *_ = np.linalg.lstsq(A, np.asarray(y, float), rcond=None)
+    coef = coef[:n0]
+    return coef[0::2] + 1j * coef[1::2]
+
+
 def coherence_debiased(Ys, v):
     """Phase stability per order of phasors ``Ys`` (K segments x orders) fitted
     on consecutive segments, each carrying white noise of expected ``|Y|^2 = v``

@@ -60,3 +60,23 @@ def test_tension_held_drives_are_not_screened_for_backlash(case_result):
     skipped = {x["not_screened"]["element"] for x in other if "not_screened" in x}
     assert {"unwind", "rewind"} <= skipped, other
     assert "sw_leader" not in skipped
+
+
+def test_a_drive_torque_near_zero_counts_as_reversing():
+    """Independent seed-5 c17: the S-wrap leader holds a steady 0.037 N*m while the
+    unwind holds 10.8 N*m; any ripple swings the leader through its dead zone."""
+    from types import SimpleNamespace as NS
+    from webline.diagnosis import others
+    t = np.linspace(0.0, 10.0, 1001)
+    cols = {"sl.tau": np.full_like(t, 0.0372), "uw.tau": np.full_like(t, -10.8), "rw.tau": np.full_like(t, 5.5)}
+    system = NS(connections=[NS(dst=e, dst_var="tau", src=s, src_var="tau")
+                             for e, s in (("sw_leader", "sl"), ("unwind", "uw"), ("rewind", "rw"))],
+                components=[NS(element=e) for e in ("sw_leader", "unwind", "rewind")])
+    ctx = NS(t=t, run=NS(duration=10.0), nominal=NS(columns=cols))
+    d = NS(system0=system, fit_ctx=lambda: [ctx])
+    rev, why = others.torque_reverses(d, "sw_leader")
+    assert rev and "largest drive torque" in why
+    assert others.torque_reverses(d, "rewind")[0] is False      # 51 % of the largest: held by the web
+    # a leader at 3 % of the largest holds a side
+    cols["sl.tau"] = np.full_like(t, 0.03 * 10.8)
+    assert others.torque_reverses(d, "sw_leader")[0] is False

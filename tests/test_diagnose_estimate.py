@@ -171,3 +171,18 @@ def test_coherence_debiased_reads_a_weak_steady_line_as_steady_and_noise_or_a_tr
     burst = np.zeros((K, 1), complex)
     burst[1, 0] = 30.0
     assert abs(float(est.coherence_debiased(burst + noise((K, 1)), v)[0]) - 1 / K) < 0.05
+
+
+def test_a_family_fitted_beside_a_near_line_takes_only_its_own_share():
+    """Seven seconds of a 4.01 Hz line beside a 3.53 Hz one ten times stronger (seed-5
+    c12's roller19 beside the rewind's order 2): alone the fit leaks, jointly it is exact."""
+    fs, T = 250.0, 7.4
+    t = np.arange(0.0, T, 1 / fs)
+    th_a, th_b = 2 * math.pi * 4.01 * t + 0.3, 2 * math.pi * 1.765 * t
+    y = 0.3 * np.cos(th_a - 0.4) + 3.0 * np.cos(2 * th_b + 1.0)
+    Y_alone = est.fit_harmonics(y, th_a, [1])[0]
+    Y_joint = est.fit_harmonics_joint(y, [(th_a, [1]), (th_b, [1, 2])])[0]
+    Y_true = est.fit_harmonics(0.3 * np.cos(th_a - 0.4), th_a, [1])[0]   # the line alone
+    assert abs(Y_alone - Y_true) > 0.01                       # the leak is real at this length
+    assert abs(Y_joint - Y_true) < 1e-9 * 3.0                   # exact but for rounding
+    assert est.fit_harmonics_joint(y, [(th_a, [1])])[0] == Y_alone

@@ -209,5 +209,13 @@ def test_a_form_the_full_set_holds_recovers_nothing_of_a_second_source():
     # against the layout's form the form would 'recover' 95 % and the source would go
     rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
     assert why is None and rows["lc19.T"]["recovered"] > 0.9
-    # a form the full set lacks is still judged against the layout's form
-    assert without_reference(dict(full, form="as modelled"), r, without) is without["nrmse"]
+    # another form ('feedforward reference': the same line at steady speed) is judged against the
+    # same set in the full set's form, not against the layout's
+    r2 = {"form": "feedforward reference", "nrmse": {"lc9.T": 0.1690, "lc19.T": 0.3520}}
+    ref2 = without_reference(full, r2, without, [r, r2])
+    assert ref2 is r["nrmse"]
+    rows, why = parsimony_rule(full["nrmse"], ref2, r2["nrmse"], r2["form"], floor)
+    assert why and rows["lc19.T"]["recovered"] < 0.05
+    # that set not simulated, or a full set in the layout's form: the layout's form
+    assert without_reference(full, r2, without, [r2]) is without["nrmse"]
+    assert without_reference(dict(full, form="as modelled"), r, without, [r]) is without["nrmse"]
