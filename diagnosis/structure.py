@@ -895,27 +895,6 @@ def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
     return rows, why
 
 
-def without_reference(full, r, without, sets=()):
-    """NRMSE per sensor against which the form of ``r`` (a set without the secondary
-    sources) is said to recover what they explained: the same set (the same sources
-    left out, the same swap) in the full set's form, found among ``sets``; the set
-    without them in the layout's form (``without``) when the full set holds the
-    layout's form or that set was not simulated. Measured against the layout's form
-    while the full set holds another, 'recovered' would credit the form with the
-    whole gap that form closes on its own (independent seed-5 c05: a real second
-    source, dropped in 'feedforward none' with lc19 0.277 -> 0.351, and again in
-    'feedforward reference' - the same line at steady speed - each time '95 %
-    recovered' against the layout's 0.970). In the full set's own form it recovers
-    nothing."""
-    if full.get("form") in (None, "as modelled"):
-        return without["nrmse"]
-    if r.get("form") == full.get("form"):
-        return r["nrmse"]
-    twin = next((x for x in sets if x.get("form") == full.get("form") and x.get("without") == r.get("without")
-                 and (x.get("swap") or {}) == (r.get("swap") or {}) and "nrmse" in x), None)
-    return twin["nrmse"] if twin is not None else without["nrmse"]
-
-
 def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     """One source and a form against two sources at one frequency.
 
@@ -940,8 +919,7 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     # secondary sources explained per harmonic) was tried and rejected the phantoms
     # of benchmark c01/c07 too, on re-estimation differences of the primary
     for r in sorted(cands, key=lambda r: r["score"]):
-        rows, why = parsimony_rule(full["nrmse"], without_reference(full, r, without, cands), r["nrmse"], r["form"],
-                                   floor)
+        rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
         if why is None:  # no run worse than the layout without the effects
             ok, w = claims.run_by_run(fit, {c.name: c.nominal for c in fit}, r["sims"], d.opt.max_worse, None)
             why = None if ok else f"{r['form']} without them {w}"
