@@ -201,7 +201,7 @@ def torque_reverses(d, element):
     for c in d.fit_ctx():
         if col not in c.nominal.columns:
             return True, "torque not recorded"
-        tau = np.asarray(c.nominal.columns[col], float)[_settle(c)]
+        tau = _settled(c, col)
         lo, hi = float(tau.min()), float(tau.max())
         spans.append((lo, hi))
         if lo <= REVERSAL * (hi - lo) and hi >= -REVERSAL * (hi - lo):
@@ -213,13 +213,18 @@ def torque_reverses(d, element):
     return False, ", ".join(f"{lo:.3g} to {hi:.3g} N*m" for lo, hi in spans)
 
 
+def _settled(c, col):
+    """Column ``col`` of run ``c``'s nominal simulation after start-up."""
+    return np.asarray(c.nominal.columns[col], float)[_settle(c)]
+
+
 def _largest_drive_torque(d, c):
     """Largest |torque| of any drive of the line in run ``c`` after start-up (N*m)."""
     out = 0.0
     for comp in d.system0.components:
         col = torque_column(d.system0, comp.element)
         if col is not None and col in c.nominal.columns:
-            out = max(out, float(np.max(np.abs(np.asarray(c.nominal.columns[col], float)[_settle(c)]))))
+            out = max(out, float(np.max(np.abs(_settled(c, col)))))
     return out
 
 

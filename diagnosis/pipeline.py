@@ -521,12 +521,16 @@ class Diagnosis:
         taken = []   # candidates of the families already taken: fitted beside each next one
         for it in range(self.opt.max_effects):
             scores = []
+            # the taken families' angles and orders, the same for every candidate of this step
+            beside = {}
+            for c in fit:
+                fams = [(self._theta_refined(c, t), self.orders_for(c, t.key)) for t in taken]
+                beside[c.name] = [f for f in fams if f[1]]
             for k in remaining:
                 E, z, n, fits, zo, coh = 0.0, 0.0, 0, {}, {}, 0.0
                 for c in fit:
                     th = self._theta_refined(c, k)
-                    beside = [(self._theta_refined(c, t), self.orders_for(c, t.key)) for t in taken]
-                    ff = self._family_fit(c, k.key, resid[c.name], th, beside=[b for b in beside if b[1]])
+                    ff = self._family_fit(c, k.key, resid[c.name], th, beside=beside[c.name])
                     if ff is None:
                         continue
                     fits[c.name] = ff
