@@ -117,3 +117,25 @@ def test_the_misfit_floor_counts_the_fine_views_degrees_of_freedom():
     nu = 2 * 3 * 0.9 * 29
     x = np.random.default_rng(1).chisquare(nu, 200000) / nu
     assert np.mean(np.log(x) ** 2) == pytest.approx(compliance.misfit_floor(c), rel=0.05)
+
+
+def test_a_shafts_nrmse_rise_counts_only_when_it_holds_block_by_block():
+    from types import SimpleNamespace
+    rng = np.random.default_rng(7)
+    t = np.arange(8000) / 250.0
+    delta = np.sin(2 * math.pi * 3.0 * t)          # the shaft's change of the model output
+    before = {"r": SimpleNamespace(columns={"lc": np.zeros_like(t)})}
+
+    def stat(scale):
+        c = SimpleNamespace(name="r", sensors=["lc"], meas={"lc": rng.normal(0.0, 1.0, t.size)})
+        after = {"r": SimpleNamespace(columns={"lc": scale * delta})}
+        return compliance.rise_t([c], before, after, "lc")
+
+    # a change far under the noise: the rise is noise's (t with 7 degrees of freedom,
+    # P(t > 3) = 1 %)
+    small = np.array([stat(0.01) for _ in range(2000)])
+    assert np.mean(small > compliance.RISE_T) < 0.03
+    # a change the data contradict (0.3 of the noise, mean rise 45 per block against a
+    # spread of 13): t near 9.5
+    big = np.array([stat(0.3) for _ in range(200)])
+    assert np.mean(big > compliance.RISE_T) > 0.98

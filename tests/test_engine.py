@@ -261,3 +261,30 @@ def test_reused_slaves_give_the_results_of_fresh_ones():
     again = engine.simulate(base, compiled=c)
     for col in load_cells(base):
         np.testing.assert_array_equal(first[col], again[col])
+
+
+def test_profiles_with_other_knots_share_the_compiled_code_and_batch():
+    # a run's profile knots (a ramp, a steady run) are parameters, not structure: the
+    # same line on two runs compiles once and runs as one batch
+    base = _system(ROOT / "scenarios" / "ewl_out_of_round.yaml", duration=1.0)
+    more = copy.deepcopy(base)
+    prof = next(c for c in more.components if c.model == "Profile")
+    n = int(prof.parameters["n"])
+    t, y = [prof.parameters[f"t[{k}]"] for k in range(1, n + 1)], [prof.parameters[f"y[{k}]"] for k in range(1, n + 1)]
+    # one knot more on the profile's own line (values unchanged): t beyond the record
+    t2, y2 = t + [t[-1] + 50.0], y + [y[-1]]
+    prof.parameters = {k: v for k, v in prof.parameters.items() if not k.startswith(("t[", "y["))}
+    prof.parameters["n"] = float(n + 1)
+    for k, (a, b) in enumerate(zip(t2, y2), start=1):
+        prof.parameters[f"t[{k}]"], prof.parameters[f"y[{k}]"] = a, b
+    ca, cb = engine.compile_system(base), engine.compile_system(more)
+    assert ca.p.size + 2 == cb.p.size
+    assert engine.structure_key(base) == engine.structure_key(more)
+    batch = engine.simulate_batch([base, more], compiled=[ca, cb])
+    singles = [engine.simulate(base, compiled=ca), engine.simulate(more, compiled=cb)]
+    for b, r in zip(batch, singles):
+        assert b.ok and r.ok
+        for c in load_cells(base):
+            np.testing.assert_allclose(b[c], r[c], rtol=1e-12, atol=0.0)
+    for c in load_cells(base):   # a knot after the record changes nothing in it
+        np.testing.assert_allclose(singles[0][c], singles[1][c], rtol=1e-12, atol=0.0)
