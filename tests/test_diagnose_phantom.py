@@ -191,3 +191,23 @@ def test_a_primary_source_is_tried_as_each_member_of_its_tie():
     assert fe_p["ranked"][0]["cand"] is r19 and fe_p["ranked"][1]["cand"] is r1
     assert fe_p["ranked"][0]["X"] is X19 and fe_p["structure"] == "feedforward reference"
     assert d.rejected[0]["element"] == "idler_r1" and "roller19" in d.rejected[0]["reason"]
+
+
+def test_a_shaft_form_chosen_with_a_source_fewer_is_measured_against_that_set():
+    from webline.diagnosis import structure
+    shafts = {"shaft on sw_leader at 6.37 Hz": ("sw_leader", 6.37)}
+    full = {"name": "feedforward none", "form": "feedforward none", "score": 0.276}
+    without = {"name": "without idler_u1", "form": "as modelled", "without": ["idler_u1"], "score": 1.113}
+    chosen = {"name": "shaft on sw_leader at 6.37 Hz, without idler_u1", "form": "shaft on sw_leader at 6.37 Hz",
+              "without": ["idler_u1"], "score": 0.383}
+    rigid = {"name": "feedforward none, without idler_u1", "form": "feedforward none", "without": ["idler_u1"],
+             "score": 0.45}
+    # the layout's form with both sources: 0.30 (a shaft that fits worse than that with one source
+    # fewer read "explains -27 %")
+    eff = structure._shaft_effect(chosen, shafts, [full, without, chosen, rigid], 0.30)
+    assert eff["explained_share"] == pytest.approx(1 - 0.383 / 1.113, rel=1e-12)
+    assert "without idler_u1" in eff["explains_what"]
+    assert eff["confidence"] == pytest.approx(1 - 0.383 / 0.45, rel=1e-12)
+    # with every source: against the layout's form as before
+    eff = structure._shaft_effect(dict(chosen, without=None), shafts, [full, chosen], 0.30)
+    assert eff["explained_share"] == pytest.approx(1 - 0.383 / 0.30, rel=1e-12)
