@@ -162,7 +162,7 @@ def test_a_rolls_shaft_takes_its_motor_side_from_the_core_not_from_the_material(
     assert f == pytest.approx(4.0, rel=1e-5)                      # 6 significant digits written
 
 
-def test_an_unwind_shaft_is_sought_on_the_load_cell_the_rigid_line_misses(tmp_path):
+def test_an_unwind_shaft_is_sought_on_the_load_cell_and_in_the_form_the_rigid_line_misses_least(tmp_path):
     # the benchmark's seed-6 c21: a shaft on the unwind, seen most in lc9 (deflection 19 against
     # 9 in lc19), while lc19 has the larger excess over its white floor in 2-8 Hz, which the
     # rigid line's ripple fit reproduces. Judged on lc19 the unwind's shaft explained 5 % of it
@@ -171,7 +171,8 @@ def test_an_unwind_shaft_is_sought_on_the_load_cell_the_rigid_line_misses(tmp_pa
     rec = next(r for r in rep["compliance"] if r["hump"]["kind"] == "spectral misfit")
     assert rec["hump"]["sensor"] == "lc9.T"
     best = rec["tried"][0]
-    assert best["element"] == "unwind" and best["explained"] >= ripple.EXPLAINED and best["own_share"] >= 0.9
+    assert best["element"] == "unwind" and best["explained"] >= ripple.EXPLAINED
+    assert best["own_share"] >= compliance.OWN_MIN
     # the truth's two-mass mode: its motor against core and material (the drawn
     # "torsional_hz" counts the core only); the roll at 6.375 in (+-2 %) on a 1.75 in core
     d = shaft.drive
@@ -182,3 +183,8 @@ def test_an_unwind_shaft_is_sought_on_the_load_cell_the_rigid_line_misses(tmp_pa
     assert 3.5 < f_true < 4.5
     # the grid steps 10-12 %, the model's motor share 30 % of the core against the truth's 25-33 %
     assert best["torsional_hz"] == pytest.approx(f_true, rel=0.25)
+    # sought in the rigid form that fits the band best too, claimed there: the refined layout
+    # carries that form (its deterministic side checked like any shaft's: no sensor's NRMSE up)
+    found = [e for e in rep["effects"] if e["kind"] == "compliance"]
+    assert [e["element"] for e in found] == ["unwind"] and rec["claimed"] == "unwind"
+    assert found[0]["model_form"] == best["form"] and found[0]["check"]["accepted"]
