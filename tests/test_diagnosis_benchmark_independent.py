@@ -318,3 +318,27 @@ def test_command_rescores_both_families_side_by_side(tmp_path):
     md = out.with_suffix(".md").read_text()
     assert "| measure | own | independent | target |" in md
     assert '## Family "own"' in md and '## Family "independent"' in md
+
+
+def test_a_roll_shafts_yardstick_is_its_two_mass_mode_with_the_material(line):
+    doc, _, facts = line
+    # seed 6 draws an unwind shaft for c21 (and c09); seed 0 a leader shaft for c21
+    for seed, cid, element in ((6, "c21", "unwind"), (0, "c21", "sw_leader")):
+        case = next(c for c in BI.draw_cases(21, seed=seed, layout_doc=doc, facts=facts) if c.id == cid)
+        e = next(x for x in case.effects if x.kind == "compliance")
+        assert e.element == element
+        d = e.drive
+        Jm, k = d["motor_inertia"], d["stiffness"]
+        # drawn: the motor against the rest of the element's own inertia (J = Jm / share)
+        _, tdoc = BI.param_set(case.model, doc)
+        J_own, _ = B._element_inertia(tdoc, element)
+        f_own = math.sqrt(k * (1 / Jm + 1 / (J_own - Jm))) / (2 * math.pi)
+        assert d["torsional_hz"] == pytest.approx(f_own, rel=1e-9)
+        if element == "unwind":
+            # 390 kg/m^3, 6 in wide, 6.375 in on a 1.75 in core: 0.064 kg*m^2 of material
+            J_mat = math.pi / 2 * 390.0 * 6 * 0.0254 * ((6.375 * 0.0254) ** 4 - (1.75 * 0.0254) ** 4)
+            assert J_mat == pytest.approx(0.0637, rel=0.01)
+            f_mode = math.sqrt(k * (1 / Jm + 1 / (J_own - Jm + J_mat))) / (2 * math.pi)
+            assert d["mode_hz"] == pytest.approx(f_mode, rel=1e-9) and d["mode_hz"] < 0.95 * d["torsional_hz"]
+        else:
+            assert d["mode_hz"] == pytest.approx(d["torsional_hz"], rel=1e-12)
