@@ -184,8 +184,8 @@ def torque_column(system, element):
     return None
 
 
-def torque_reverses(d, element):
-    """(reverses, range text): does the nominal model's drive torque of ``element``
+def torque_reverses(d, element, sims=None):
+    """(reverses, range text): does the nominal model's (or ``sims``', by run) drive torque of ``element``
     pass through zero after start-up in a fit run, or stay so near it that any
     disturbance does? A dead zone is crossed only then; a drive held by web
     tension (an unwind holding back) never shows its backlash. Near zero: within
@@ -199,32 +199,34 @@ def torque_reverses(d, element):
         return True, "torque not recorded"
     spans, peak = [], 0.0
     for c in d.fit_ctx():
-        if col not in c.nominal.columns:
+        sim = c.nominal if sims is None else sims[c.name]
+        if col not in sim.columns:
             return True, "torque not recorded"
-        tau = _settled(c, col)
+        tau = _settled(c, col, sim)
         lo, hi = float(tau.min()), float(tau.max())
         spans.append((lo, hi))
         if lo <= REVERSAL * (hi - lo) and hi >= -REVERSAL * (hi - lo):
             return True, f"{lo:.3g} to {hi:.3g} N*m"
-        peak = max(peak, _largest_drive_torque(d, c))
+        peak = max(peak, _largest_drive_torque(d, c, sim))
     if peak > 0 and all(max(abs(lo), abs(hi)) <= NEAR_ZERO * peak for lo, hi in spans):
         return True, (", ".join(f"{lo:.3g} to {hi:.3g} N*m" for lo, hi in spans)
                       + f", within {100 * NEAR_ZERO:.0f} % of the line's largest drive torque {peak:.3g} N*m of zero")
     return False, ", ".join(f"{lo:.3g} to {hi:.3g} N*m" for lo, hi in spans)
 
 
-def _settled(c, col):
-    """Column ``col`` of run ``c``'s nominal simulation after start-up."""
-    return np.asarray(c.nominal.columns[col], float)[_settle(c)]
+def _settled(c, col, sim=None):
+    """Column ``col`` of run ``c``'s nominal simulation (or ``sim``) after start-up."""
+    return np.asarray((c.nominal if sim is None else sim).columns[col], float)[_settle(c)]
 
 
-def _largest_drive_torque(d, c):
+def _largest_drive_torque(d, c, sim=None):
     """Largest |torque| of any drive of the line in run ``c`` after start-up (N*m)."""
+    sim = c.nominal if sim is None else sim
     out = 0.0
     for comp in d.system0.components:
         col = torque_column(d.system0, comp.element)
-        if col is not None and col in c.nominal.columns:
-            out = max(out, float(np.max(np.abs(_settled(c, col)))))
+        if col is not None and col in sim.columns:
+            out = max(out, float(np.max(np.abs(_settled(c, col, sim)))))
     return out
 
 

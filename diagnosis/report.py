@@ -84,6 +84,7 @@ def build(d):
     rep["ripple"] = {r: {"levels_Nm_per_rtHz": v["levels_Nm_per_rtHz"]} for r, v in rf.items()} or None
     rep["findings"] = compliance.label(claims.humps(d, d.noise, ripple_fit=rf), getattr(d, "compliance", None))
     rep["compliance"] = getattr(d, "compliance", None)
+    rep["backlash"] = getattr(d, "backlash", None)
     rep["rejected"] = _rejected(d)
     rep["structure"] = getattr(d, "structure", None)
     rep["transfer"] = getattr(d, "transfer", None)
