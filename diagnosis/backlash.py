@@ -83,7 +83,7 @@ def screen(d):
     ``d.steps``. Records what was tried in ``d.backlash``."""
     from webline.diagnosis.compliance import rise_t
     d.backlash = []
-    taken = {o["element"] for o in getattr(d, "other", []) or [] if o["kind"] in ("compliance", "backlash")}
+    taken = others.non_ideal_drives(d)
     fit = d.fit_ctx()
     ref = rec_ref = None
     for spec in others.drive_candidates(d):

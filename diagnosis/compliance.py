@@ -400,7 +400,7 @@ def screen(d):
     humps = humps[:MAX_HUMPS] + bands
     cache = {}
     # a drive the other-effects screen gave a shaft or a dead zone already is not ideal any more
-    taken = {o["element"] for o in getattr(d, "other", []) or [] if o["kind"] in ("compliance", "backlash")}
+    taken = others.non_ideal_drives(d)
     specs = [sp for sp in others.drive_candidates(d) if sp[0] not in taken]
     d.compliance = []
     for hump in humps:

@@ -176,6 +176,12 @@ def drive_candidates(d):
     return out
 
 
+def non_ideal_drives(d):
+    """Elements whose drive an effect already found makes non-ideal (a shaft or a dead
+    zone in ``d.other``): the screens that add one skip them."""
+    return {o["element"] for o in getattr(d, "other", []) or [] if o["kind"] in ("compliance", "backlash")}
+
+
 def torque_column(system, element):
     """``component.output`` of the torque that drives ``element`` (its speed loop), or None."""
     for k in system.connections:

@@ -125,7 +125,7 @@ def shaft_forms(d, effs):
         return []
     out = []
     # a drive the refined layout gives a dead zone already (diagnosis.backlash) is not ideal any more
-    taken = {o["element"] for o in getattr(d, "other", []) or [] if o["kind"] in ("compliance", "backlash")}
+    taken = others.non_ideal_drives(d)
     for spec in others.drive_candidates(d):
         if spec[2][0] != "inertia" or spec[0] in taken:
             continue
@@ -926,8 +926,7 @@ def own_orders(d, full, r, sec):
                 orders, Yd = _harmonics(d, c, cand, c.meas[s] - c.nominal.columns[s])
                 _, Yw = _harmonics(d, c, cand, c.meas[s] - r["sims"][c.name].columns[s])
                 _, Yf = _harmonics(d, c, cand, c.meas[s] - full["sims"][c.name].columns[s])
-                th = d._theta_refined(c, cand)
-                f = abs(th[c.mask][-1] - th[c.mask][0]) / (2 * math.pi) / max(c.T, 1e-9)
+                f = c.freq[cand.key] * (1.0 + c.kappa.get(cand.key, 0.0))   # as claims.local_energy
                 z = est.harmonic_z(Yd, np.asarray(orders) * f, c.floors[s], c.T)
                 for j, zj, yd, yw, yf in zip(orders, z, Yd, Yw, Yf):
                     e = abs(yd) ** 2
