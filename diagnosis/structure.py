@@ -952,7 +952,9 @@ def own_lines_rule(own, form="the form"):
     record about as well yet leaves a real second source's own lines where they
     were; a phantom's own lines are the primary's transfer error, a small part of
     the gap (independent cases, largest sum: real seed-8 c05 3.4 % of lc9's gap;
-    phantoms seed-3 c13 1.35 %, seed-2 c07 0.2 %, seed-0 c07 0.02 %, seed-3 c04 none). Its whole-record
+    phantoms seed-3 c13 1.34 %, seed-2 c07 0.2 %, seed-0 c07 0.02 %, seed-3 c04 none).
+    It does not separate every case: seed-5 c05's real idler_r1 sums to 0.97 % and is
+    still dropped. Its whole-record
     NRMSE hides a real one: the primary's re-estimate in the form moves it by as much."""
     sums = {}
     for o in own:
