@@ -48,10 +48,12 @@ def _energy(d, sims):
                for c in d.fit_ctx() for s in c.sensors)
 
 
-def _reestimate(d, doc, label):
+def reestimate(d, doc, label):
     """(doc, residual energy, sims, [X per final effect]) with the periodic effects'
     coefficients polished in ``doc`` (time-domain Gauss-Newton, the orders they have),
-    or None when there are none or no step helps."""
+    or None when there are none or no step helps. A drive effect changes how the
+    periodic sources' lines pass through the line: their estimates, made without
+    it, are polished in the model with it (here and in the shaft screen)."""
     from webline.diagnosis import regress
     if not d.final_effects:
         return None
@@ -117,14 +119,14 @@ def screen(d):
         rec["width_identifiable"] = bool(es) and (max(es) - min(es)) > WIDTH_RTOL * min(es)
         if ref is None:
             # the same re-estimate without a dead zone: what the polish alone gains is no evidence
-            got0 = _reestimate(d, d.refined_doc, "no backlash")
+            got0 = reestimate(d, d.refined_doc, "no backlash")
             ref = (got0[1], got0[2]) if got0 is not None and got0[1] < e0 else (e0, base)
             rec_ref = {"residual_energy_ratio": ref[0] / e0 if e0 > 0 else None}
         rec["reestimated_without"] = rec_ref
         deg, e, sims, doc = best
         # the periodic sources' estimates were made without the dead zone, which changes how
         # their lines pass through the S-wrap: re-estimated in the model with it
-        got = _reestimate(d, doc, f"{el} backlash {deg:g} deg")
+        got = reestimate(d, doc, f"{el} backlash {deg:g} deg")
         if got is not None and got[1] < e:
             doc, e, sims, new_X = got
             rec["reestimated"] = True
