@@ -32,3 +32,18 @@ def measured_run(folder, name, truth_layout, exp, *, exp_true=None, seed=0, nois
                header=",".join(["time [s]"] + list(cols)), comments="", fmt="%.9g")
     (folder / f"{name}.yaml").write_text(yaml.safe_dump({"data": f"{name}.csv", "experiment": exp}))
     return folder / f"{name}.yaml"
+
+
+def independent_cases(root, seed, ids, timeout=1200):
+    """Cases ``ids`` of the independent benchmark's draw for ``seed``, diagnosed blind
+    in a subprocess (one job) in ``root``: {id: the benchmark's result dict}."""
+    from webline.diagnosis import benchmark as B
+    from webline.diagnosis import benchmark_independent as I
+    line = B.derive_line()
+    drawn = {c.id: c for c in I.draw_cases(24, seed, layout_doc=line)}
+    out = {}
+    for cid in ids:
+        res = I.evaluate_case(drawn[cid], root, line, timeout=timeout, extra=["--jobs", "1"])
+        assert res["report"] is not None, res.get("stderr") or res.get("generation_error")
+        out[cid] = res
+    return out

@@ -16,23 +16,14 @@ backlash beside eccentric idlers) are not found, see docs/diagnose.md.
 """
 import pytest
 
-from webline.diagnosis import benchmark as B
-from webline.diagnosis import benchmark_independent as I
+from records import independent_cases
 
 SEED = 8
 
 
 @pytest.fixture(scope="module")
 def cases(tmp_path_factory):
-    root = tmp_path_factory.mktemp("backlash_crossed")
-    line = B.derive_line()
-    drawn = {c.id: c for c in I.draw_cases(24, SEED, layout_doc=line)}
-    out = {}
-    for cid in ("c24", "c13"):
-        res = I.evaluate_case(drawn[cid], root, line, timeout=1200, extra=["--jobs", "1"])
-        assert res["report"] is not None, res.get("stderr") or res.get("generation_error")
-        out[cid] = res
-    return out
+    return independent_cases(tmp_path_factory.mktemp("backlash_crossed"), SEED, ("c24", "c13"))
 
 
 def test_the_cases_are_the_ones_drawn(cases):

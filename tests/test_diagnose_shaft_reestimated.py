@@ -13,20 +13,14 @@ c24 is the case the rule was built on.
 """
 import pytest
 
-from webline.diagnosis import benchmark as B
-from webline.diagnosis import benchmark_independent as I
+from records import independent_cases
 
 SEED = 9
 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    root = tmp_path_factory.mktemp("shaft_reestimated")
-    line = B.derive_line()
-    drawn = {c.id: c for c in I.draw_cases(24, SEED, layout_doc=line)}
-    res = I.evaluate_case(drawn["c24"], root, line, timeout=1800, extra=["--jobs", "1"])
-    assert res["report"] is not None, res.get("stderr") or res.get("generation_error")
-    return res
+    return independent_cases(tmp_path_factory.mktemp("shaft_reestimated"), SEED, ("c24",), timeout=1800)["c24"]
 
 
 def test_the_case_is_the_one_drawn(case):
