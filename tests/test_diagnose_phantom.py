@@ -213,37 +213,31 @@ def test_a_shaft_form_chosen_with_a_source_fewer_is_measured_against_that_set():
     assert eff["explained_share"] == pytest.approx(1 - 0.383 / 0.30, rel=1e-12)
 
 
-def test_own_lines_rule_on_measured_orders():
+def test_own_lines_on_measured_orders():
     """The secondary source's own orders, as parsimony records them (independent
-    cases, measured): a real one leaves lines no form passes on, a phantom's are a
-    small part of the gap."""
-    from webline.diagnosis.structure import OWN_GAIN, own_lines_rule
+    cases, measured), summed into the record ``own_lines``."""
+    from webline.diagnosis.structure import own_lines
 
     def row(el, j, s, left_w, left_f, share, run="run1"):
         return {"element": el, "order": j, "run": run, "sensor": s, "z": 100.0,
                 "left_without": left_w, "left_full": left_f, "share_of_gap": share}
     # seed-8 c05 (idler_u1 real, reported as its twin roller9): 'feedforward none' without it
-    # leaves orders 3, 4, 6 on lc9 - 1.05 + 1.69 + 0.65 = 3.4 % of lc9's gap: kept
+    # leaves orders 3, 4, 6 on lc9 - 1.05 + 1.69 + 0.65 = 3.4 % of lc9's gap
     real = [row("roller9", 3, "lc9.T", 0.64, 0.38, 0.0403), row("roller9", 4, "lc9.T", 0.53, 0.00, 0.0318),
             row("roller9", 6, "lc9.T", 0.96, 0.02, 0.0069), row("roller9", 5, "lc19.T", 0.31, 0.30, 0.0801)]
-    why = own_lines_rule(real, "'feedforward none'")
-    assert why and "lc9.T" in why and "roller9" in why
+    got = own_lines(real)
+    assert (got["element"], got["sensor"], got["orders"]) == ("roller9", "lc9.T", [4, 3, 6])
+    assert got["share"] == pytest.approx(0.0403 * 0.26 + 0.0318 * 0.53 + 0.0069 * 0.94)
     # seed-3 c04 (phantom idler_r1): its large lines are mostly passed on by the form (38 %, 39 % left)
     phantom = [row("idler_r1", 3, "lc19.T", 0.38, 0.00, 0.0192), row("idler_r1", 5, "lc19.T", 0.92, 3.75, 0.0004),
                row("idler_r1", 6, "lc19.T", 3.61, 7.99, 0.0005), row("idler_r1", 6, "lc9.T", 0.39, 0.18, 0.0158)]
-    assert own_lines_rule(phantom) is None
-    # seed-3 c13 (phantom idler_r1): order 3 on lc19 left 82 %, 1.65 % of the gap: 1.35 %
-    assert own_lines_rule([row("idler_r1", 3, "lc19.T", 0.82, 0.00, 0.0165),
-                           row("idler_r1", 4, "lc9.T", 0.84, 0.23, 0.0001)]) is None
+    assert own_lines(phantom)["share"] < 0
     # seed-0 c07 (phantom roller9 at roller19's frequency): its orders 1 and 2 are the primary's large
-    # lines (89 % and 8 % of lc9's gap), 2 and 9 % of them left by the form's re-estimate (2.4 % of
-    # the gap in all) - not the phantom's own
-    assert own_lines_rule([row("roller9", 1, "lc9.T", 0.020, 0.00, 0.889), row("roller9", 2, "lc9.T", 0.086, 0.00, 0.0793),
-                           row("roller9", 6, "lc9.T", 0.537, 0.00, 0.0003)]) is None
-    # the sum is per run and sensor: the same lines split over two runs do not add up
-    split = [row("x", 4, "lc9.T", 1.0, 0.0, 0.6 * OWN_GAIN, run=r) for r in ("run1", "run2")]
-    assert own_lines_rule(split) is None
-    assert own_lines_rule([row("x", 4, "lc9.T", 1.0, 0.0, 1.1 * OWN_GAIN)])
-    # no line recorded, or none with a share: nothing to keep
-    assert own_lines_rule([]) is None
-    assert own_lines_rule([row("x", 4, "lc9.T", 1.0, 0.0, None)]) is None
+    # lines (89 % and 8 % of lc9's gap), 2 and 9 % of them left by the form's re-estimate: not counted
+    got = own_lines([row("roller9", 1, "lc9.T", 0.020, 0.00, 0.889), row("roller9", 2, "lc9.T", 0.086, 0.00, 0.0793),
+                     row("roller9", 6, "lc9.T", 0.537, 0.00, 0.0003)])
+    assert got["orders"] == [6] and got["share"] == pytest.approx(0.0003 * 0.537)
+    # summed per run and sensor; nothing recorded, nothing to sum
+    split = [row("x", 4, "lc9.T", 1.0, 0.0, 0.01, run=r) for r in ("run1", "run2")]
+    assert own_lines(split)["share"] == pytest.approx(0.01)
+    assert own_lines([]) is None and own_lines([row("x", 4, "lc9.T", 1.0, 0.0, None)]) is None
