@@ -30,8 +30,8 @@ import math
 import numpy as np
 
 from webline.diagnosis import claims
-from webline.diagnosis import layout_edit
 from webline.diagnosis import others
+from webline.diagnosis import regress
 
 log = logging.getLogger("webline.diagnose")
 
@@ -46,37 +46,6 @@ def _energy(d, sims):
     """Residual energy over the fit runs' fit samples, all sensors."""
     return sum(float(np.sum((c.meas[s] - sims[c.name].columns[s])[c.mask] ** 2))
                for c in d.fit_ctx() for s in c.sensors)
-
-
-def reestimate(d, doc, label):
-    """(doc, residual energy, sims, [X per final effect]) with the periodic effects'
-    coefficients polished in ``doc`` (time-domain Gauss-Newton, the orders they have),
-    or None when there are none or no step helps. A drive effect changes how the
-    periodic sources' lines pass through the line: their estimates, made without
-    it, are polished in the model with it (here and in the shaft screen)."""
-    from webline.diagnosis import regress
-    if not d.final_effects:
-        return None
-    H = d.opt.harmonics
-    cands = [fe["ranked"][0]["cand"] for fe in d.final_effects]
-    Xs0 = [layout_edit.current_fourier(doc, k.element, H)[:H] for k in cands]
-    orders = [[j + 1 for j in np.flatnonzero(np.abs(X) > 0)] for X in Xs0]
-    if not any(orders):
-        return None
-    try:
-        Xs, sims_fit, _, _ = regress.gauss_newton(d, doc, cands, Xs0, orders, d.fit_ctx(), steps=2,
-                                                  drop_rounds=0, label=f"{label}, re-estimate")
-    except Exception as exc:  # noqa: BLE001 - no re-estimate, the screen goes on with the first one
-        log.info("  %s: no re-estimate (%s)", label, (str(exc).splitlines() or [""])[0][:200])
-        return None
-    if sims_fit is None:
-        return None
-    doc2 = regress._doc(d, doc, cands, Xs)
-    try:
-        sims = d._simulate_all(doc2, f"refined +{label}, re-estimated")
-    except Exception:  # noqa: BLE001
-        return None
-    return doc2, _energy(d, sims), sims, Xs
 
 
 def screen(d):
@@ -119,16 +88,18 @@ def screen(d):
         rec["width_identifiable"] = bool(es) and (max(es) - min(es)) > WIDTH_RTOL * min(es)
         if ref is None:
             # the same re-estimate without a dead zone: what the polish alone gains is no evidence
-            got0 = reestimate(d, d.refined_doc, "no backlash")
-            ref = (got0[1], got0[2]) if got0 is not None and got0[1] < e0 else (e0, base)
+            got0 = regress.reestimate(d, d.refined_doc, "no backlash")
+            e_got0 = _energy(d, got0[1]) if got0 is not None else math.inf
+            ref = (e_got0, got0[1]) if e_got0 < e0 else (e0, base)
             rec_ref = {"residual_energy_ratio": ref[0] / e0 if e0 > 0 else None}
         rec["reestimated_without"] = rec_ref
         deg, e, sims, doc = best
         # the periodic sources' estimates were made without the dead zone, which changes how
         # their lines pass through the S-wrap: re-estimated in the model with it
-        got = reestimate(d, doc, f"{el} backlash {deg:g} deg")
-        if got is not None and got[1] < e:
-            doc, e, sims, new_X = got
+        got = regress.reestimate(d, doc, f"{el} backlash {deg:g} deg")
+        e_got = _energy(d, got[1]) if got is not None else math.inf
+        if e_got < e:
+            (doc, sims, new_X), e = got, e_got
             rec["reestimated"] = True
         else:
             new_X = None
@@ -178,8 +149,7 @@ def screen(d):
         rec["claimed"] = True
         ref = None   # the next drive is judged against the model with this one's dead zone
         if new_X is not None:
-            for fe, X in zip(d.final_effects, new_X):
-                fe["ranked"][0]["X"] = X
+            regress.adopt(d, new_X)
         d.other = list(getattr(d, "other", []) or []) + [eff]
         d.refined_doc = doc
         d.steps.append({"added": el, "kind": "backlash", "sims": sims, "check": chk})

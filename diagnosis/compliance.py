@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from webline.diagnosis import backlash, claims, others, ripple
+from webline.diagnosis import claims, others, regress, ripple
 
 log = logging.getLogger("webline.diagnose")
 
@@ -484,11 +484,11 @@ def screen(d):
                 # the periodic sources' estimates were made on rigid drives; a shaft on a drive
                 # their lines pass changes their transfer (independent seed-9 c24: the S-wrap
                 # leader's 10.6 Hz shaft raised lc19 by 8.1 % with idler_r1's run-out as estimated)
-                got = backlash.reestimate(d, p["doc"], f"{p['element']} shaft {p['torsional_hz']:.3g} Hz")
+                got = regress.reestimate(d, p["doc"], f"{p['element']} shaft {p['torsional_hz']:.3g} Hz")
                 if got is not None:
-                    chk2 = _nrmse_check(d, d.steps[-1]["sims"], got[2], base, p)
+                    chk2 = _nrmse_check(d, d.steps[-1]["sims"], got[1], base, p)
                     if chk2["accepted"] or max(chk2["nrmse_after"].values()) < max(chk["nrmse_after"].values()):
-                        p, sims_b, chk = dict(p, doc=got[0], new_X=got[3]), got[2], chk2
+                        p, sims_b, chk = dict(p, doc=got[0], new_X=got[2]), got[1], chk2
             log.info("  check of %s's shaft at %.3g Hz (%s%s): %s", p["element"], p["torsional_hz"],
                      f"form {p['form']}" if p.get("form") else "the layout's form",
                      ", periodic effects re-estimated" if p.get("new_X") is not None else "", chk["reason"])
@@ -507,8 +507,7 @@ def screen(d):
         eff["detail"] += f"; {min(span):.3g}-{max(span):.3g} Hz fit about as well" if len(span) > 1 else ""
         rec["claimed"] = b["element"]
         if b.get("new_X") is not None:
-            for fe, X in zip(d.final_effects, b["new_X"]):
-                fe["ranked"][0]["X"] = X
+            regress.adopt(d, b["new_X"])
             eff["detail"] += "; the periodic effects re-estimated with it"
         d.other = list(getattr(d, "other", []) or []) + [eff]
         d.refined_doc = b["doc"]

@@ -368,6 +368,44 @@ def select(d, ranked, orders, ctxs):
     return out
 
 
+def reestimate(d, doc, label):
+    """(doc, sims, [X per final effect]) with the periodic effects' coefficients polished
+    in ``doc`` (two Gauss-Newton steps on the orders they have, from the coefficients
+    ``doc`` holds), simulated on every run; None when there are none or no step helps.
+    A drive effect (a dead zone, a shaft) changes how the periodic sources' lines pass
+    through the line: their estimates, made without it, are polished in the model with
+    it (:mod:`diagnosis.backlash`, :mod:`diagnosis.compliance`)."""
+    from webline.diagnosis import layout_edit
+    if not d.final_effects:
+        return None
+    H = d.opt.harmonics
+    cands = [fe["ranked"][0]["cand"] for fe in d.final_effects]
+    Xs0 = [layout_edit.current_fourier(doc, k.element, H)[:H] for k in cands]
+    orders = [[j + 1 for j in np.flatnonzero(np.abs(X) > 0)] for X in Xs0]
+    if not any(orders):
+        return None
+    try:
+        Xs, sims_fit, _, _ = gauss_newton(d, doc, cands, Xs0, orders, d.fit_ctx(), steps=2, drop_rounds=0,
+                                          label=f"{label}, re-estimate")
+    except Exception as exc:  # noqa: BLE001 - no re-estimate, the screen goes on with the first one
+        log.info("  %s: no re-estimate (%s)", label, (str(exc).splitlines() or [""])[0][:200])
+        return None
+    if sims_fit is None:
+        return None
+    doc2 = _doc(d, doc, cands, Xs)
+    try:
+        sims = d._simulate_all(doc2, f"refined +{label}, re-estimated")
+    except Exception:  # noqa: BLE001
+        return None
+    return doc2, sims, Xs
+
+
+def adopt(d, Xs):
+    """The final effects take the coefficients ``Xs`` (one per effect, as :func:`reestimate`)."""
+    for fe, X in zip(d.final_effects, Xs):
+        fe["ranked"][0]["X"] = X
+
+
 def lines_excess(d, ctxs, cand, orders, sims):
     """Weighted energy (units of :func:`sse`) of the periodic residual (data - ``sims``)
     at ``cand``'s orders, each run and sensor's lines fitted freely on its angle, less
@@ -376,11 +414,11 @@ def lines_excess(d, ctxs, cand, orders, sims):
     for c in ctxs:
         w = _weights(c)
         th = d._theta_refined(c, cand)
+        by_noise = sum(noise_drop(d, [c], cand, j) for j in orders)   # per sensor of the run
         for s in c.sensors:
             r = _periodic(c, c.meas[s] - sims[c.name].columns[s])
             Y = est.fit_harmonics(r, th, orders, c.mask)
-            e += w[s] ** 2 * 0.5 * float(np.sum(np.abs(Y) ** 2)) * float(c.mask.sum())
-            e -= sum(noise_drop(d, [c], cand, j) for j in orders)
+            e += w[s] ** 2 * 0.5 * float(np.sum(np.abs(Y) ** 2)) * float(c.mask.sum()) - by_noise
     return max(e, 1e-300)
 
 
@@ -401,8 +439,8 @@ def _verify_pair(d, cands, pair, per, resp, cols, ctxs, noise, Xb):
     coef, _, e2 = solve(d, ctxs, resp, cols, sims, per[i])
     drop = e_b - e2
     excess = max(e_b - noise, 1e-12 * max(e_b, 1e-300))
-    floor = 0.5 * Z_ORDER * sum(noise_drop(d, ctxs, cands[i], j) for j in {cols[m][1] for m in per[i]})
     ords_i = sorted({cols[m][1] for m in per[i]})
+    floor = 0.5 * Z_ORDER * sum(noise_drop(d, ctxs, cands[i], j) for j in ords_i)
     lines = lines_excess(d, ctxs, cands[i], ords_i, sims)
     log.info("  pair check: %s polished leaves %.4g; %s removes %.4g more (%.0f %% of the excess, %.0f %% of "
              "what its lines hold above noise; noise would give %.3g)", cands[b].element, e_b, cands[i].element,
