@@ -30,8 +30,8 @@ def parser():
                     help="do not screen backlash, compliance, sensor and parameter effects")
     ap.add_argument("--no-structure", action="store_true",
                     help="do not screen model-form alternatives (feed forward, loop gains, ...)")
-    ap.add_argument("--max-structures", type=int, default=8,
-                    help="model-form alternatives screened at most (default 8)")
+    ap.add_argument("--max-structures", type=int, default=None,
+                    help="model-form alternatives screened at most (default: every one)")
     ap.add_argument("--jobs", type=int, default=None,
                     help="simulations run in parallel worker processes (default: 2 if the machine has 2+ cores)")
     ap.add_argument("--time", metavar="COL", default=None,

@@ -70,7 +70,7 @@ class Options:
     engine: str = "fast"             # "fast": compiled monolithic ODE; "cosim": FMU co-simulation
     max_worse: float = 0.02          # an effect may raise no sensor's NRMSE (fit runs) by more than this share
     structure: bool = True           # screen model-form alternatives when an effect's check says so
-    max_structures: int = 8          # structural alternatives simulated at most
+    max_structures: int = None       # structural alternatives simulated at most (None: every one)
     confirm: bool = True             # fast engine: run the refined layout once through the co-simulation
     transfer: bool = True            # lines within the data sheet's tolerances (diagnosis.transfer): each
     #                                  order's amplitude range; held-out runs: leave out orders whose
