@@ -51,6 +51,7 @@ TIE = 0.01               # predicted scores within this share of the second best
 MAX_TIED = 4             # ... up to this many more
 MAX_SWAPS = 3            # tied members tried in a primary source's place, in the set without the secondary ones
 ORDER_Z = 9.0            # parsimony's record of the secondary sources' orders: those the data show (z)
+OWN_LINES_KEEP = 0.05    # ... a secondary source whose own lines left carry this share of a sensor's gap stays
 NOT_IDENTIFIABLE = 2.0   # dominant-order amplitude range (max/min) beyond which it is not identifiable
 
 
@@ -102,7 +103,8 @@ def alternatives(d):
 
 
 SHAFT_RATIOS = (0.6, 0.8, 1.0, 1.25)   # shaft forms: torsional mode / the first effect's fundamental
-SHAFT_MARGIN = 0.1   # a shaft form's sum of NRMSE^2 below the best rigid form's with the same sources, at least
+SHAFT_MARGIN = 0.1   # a drive form's sum of NRMSE^2 below the best rigid form's with the same sources, at least
+DEAD_ZONE_DEG = 1.0  # dead-zone forms: total width (one; the report says the width is the form's, not estimated)
 
 
 def _shaft_clears(entries, shafts):
@@ -145,16 +147,43 @@ def shaft_forms(d, effs):
             sets = others._drive_doc({"base": "", "set": {}}, spec, ft, 0.0)["set"]
             out.append((f"shaft on {spec[0]} at {ft:.3g} Hz",
                         f"a compliant drive shaft on {spec[0]}, torsional mode {ft:.3g} Hz (5 % damping)",
-                        dict(sets), (spec[0], ft)))
+                        dict(sets), (spec[0], "compliance", ft)))
     return out
 
 
-def _shaft_effect(chosen, shafts, scored, cur_score):
-    """The compliance a chosen shaft form (``shafts``: form name -> (element, f_t))
-    claims, as an effect of the report (the others' record shape); its confidence:
-    how much better it fits than the best rigid form simulated with as many sources
-    (or the layout's own)."""
-    el, ft = shafts[chosen["form"]]
+def dead_zone_forms(d, sims, forms):
+    """Dead zones on the drives whose torque the current model (``sims``) swings through
+    or near zero, as model forms beside each feed-forward form of ``forms`` (the
+    :func:`alternatives`): [(name, description, sets, (element, "backlash", width deg))].
+    A dead zone changes how a periodic source's line passes the drive, and it does so
+    in the form that passes the line as the line does: independent seed-10 c24's leader
+    backlash (1.2 deg) beside an eccentric idler, simulated with the truth's run-out in
+    the nominal layout, left lc9/lc19 at NRMSE 0.70/0.37 in 'feedforward none' with a
+    1.2 deg dead zone, 0.94/0.75 without it, and 1.18/0.84 in the layout's form with it;
+    there a phantom shaft form took its place. One width, :data:`DEAD_ZONE_DEG`: once
+    the swing crosses the zone, 0.6-2.5 deg fitted alike (0.734-0.751 on lc9)."""
+    from webline.diagnosis import backlash, others
+    taken = others.non_ideal_drives(d)
+    ff = [(name, sets) for name, _, sets in forms if name in ("feedforward none", "feedforward reference")]
+    out = []
+    for spec in others.drive_candidates(d):
+        if spec[0] in taken or not others.torque_reverses(d, spec[0], sims=sims)[0]:
+            continue
+        dz = others._drive_doc({"base": "", "set": {}}, spec, backlash.SHAFT_HZ,
+                               math.radians(DEAD_ZONE_DEG))["set"]
+        for name, sets in ff:
+            out.append((f"{name} + dead zone on {spec[0]}",
+                        f"{name}; a {DEAD_ZONE_DEG:g} deg dead zone in {spec[0]}'s drive (stiff shaft)",
+                        {**sets, **dz}, (spec[0], "backlash", DEAD_ZONE_DEG)))
+    return out
+
+
+def _drive_effect(chosen, shafts, scored, cur_score):
+    """The compliance or backlash a chosen drive form (``shafts``: form name -> (element,
+    kind, torsional mode Hz or dead-zone width deg)) claims, as an effect of the report
+    (the others' record shape); its confidence: how much better it fits than the best
+    rigid form simulated with as many sources (or the layout's own)."""
+    el, kind, value = shafts[chosen["form"]]
     if chosen.get("without"):
         # a shaft chosen with a source fewer (parsimony) is measured against that set in the
         # layout's form: against the full set it read "explains -27 %" (independent seed-7 c12)
@@ -166,26 +195,38 @@ def _shaft_effect(chosen, shafts, scored, cur_score):
     same = sorted({r["form"] for r in scored if r.get("form") in shafts and r["form"] != chosen["form"]
                    and r["score"] <= chosen["score"] + AS_WELL * max(cur_score - chosen["score"], 1e-12)})
     gain = (cur_score - chosen["score"]) / cur_score if cur_score > 0 else 0.0
-    return {
-        "element": el, "kind": "compliance",
-        "candidates": [{"element": el, "kind": "compliance", "explained_share": gain}],
-        "fundamental_hz": ft,
+    explains = ("sum of the load cells' NRMSE^2 over the fit runs (as a model form, with the effects"
+                + (f" it keeps, without {', '.join(chosen['without'])})" if chosen.get("without") else ")"))
+    scores = (f"sum of NRMSE^2 {chosen['score']:.4g}, best rigid form {nxt:.4g}, layout's form "
+              f"{cur_score:.4g}" + (f"; {', '.join(same)} fit about as well" if same else ""))
+    eff = {
+        "element": el, "kind": kind,
+        "candidates": [{"element": el, "kind": kind, "explained_share": gain}],
         "harmonics": [],
         "explained_share": gain,
-        "explains_what": ("sum of the load cells' NRMSE^2 over the fit runs (as a model form, with the effects"
-                          + (f" it keeps, without {', '.join(chosen['without'])})" if chosen.get("without") else ")")),
+        "explains_what": explains,
         "confidence": float(np.clip(1.0 - chosen["score"] / nxt, 0.0, 1.0)) if nxt > 0 else 0.0,
-        "confidence_basis": (f"a compliant shaft on {el}'s drive (torsional mode {ft:.3g} Hz, a grid of "
-                             f"{', '.join(f'{x:g}' for x in SHAFT_RATIOS)} x the first effect's fundamental) "
-                             f"carries the periodic effects' lines between the tension zones as the data do: "
-                             f"sum of NRMSE^2 {chosen['score']:.4g}, best rigid form {nxt:.4g}, layout's form "
-                             f"{cur_score:.4g}" + (f"; {', '.join(same)} fit about as well" if same else "")),
-        "parameters": {"torsional_frequency": {"estimated": ft, "unit": "Hz"},
-                       "damping_ratio": {"estimated": 0.05, "unit": "1"}},
-        "detail": f"{el} compliance, torsional mode {ft:.3g} Hz (a model form of the structure screen)",
         "check": chosen.get("check"),
         "model_form": chosen["name"],
     }
+    if kind == "backlash":
+        from webline.diagnosis import backlash
+        return {**eff, "fundamental_hz": None,
+                "confidence_basis": (f"a dead zone in {el}'s drive, crossed by the torque the periodic sources "
+                                     f"swing through zero, passes their lines between the tension zones as the "
+                                     f"data do: {scores}"),
+                "parameters": {"backlash": {"estimated": math.radians(value), "unit": "rad", "identifiable": False},
+                               "torsional_frequency": {"estimated": backlash.SHAFT_HZ, "unit": "Hz"}},
+                "detail": (f"{el} backlash, {value:g} deg dead zone (a model form of the structure screen; the "
+                           f"width is the form's, not estimated)")}
+    return {**eff, "fundamental_hz": value,
+            "confidence_basis": (f"a compliant shaft on {el}'s drive (torsional mode {value:.3g} Hz, a grid of "
+                                 f"{', '.join(f'{x:g}' for x in SHAFT_RATIOS)} x the first effect's fundamental) "
+                                 f"carries the periodic effects' lines between the tension zones as the data do: "
+                                 f"{scores}"),
+            "parameters": {"torsional_frequency": {"estimated": value, "unit": "Hz"},
+                           "damping_ratio": {"estimated": 0.05, "unit": "1"}},
+            "detail": f"{el} compliance, torsional mode {value:.3g} Hz (a model form of the structure screen)"}
 
 
 def _apply(doc, sets):
@@ -588,6 +629,8 @@ def screen(d):
         alts = alts[:max(0, d.opt.max_structures)]
     # shafts on the driven rollers: a form of the line's transfer between the zones
     sf = shaft_forms(d, [e for e in effs if e[2] is not None])
+    # ... and dead zones in the drives the periodic sources swing through zero
+    sf += dead_zone_forms(d, cur_sims, alts) if effs else []
     shafts = {name: sh for name, _, _, sh in sf}
     alts += [(name, desc, sets) for name, desc, sets, _ in sf]
     # the full set is screened in the other forms too: a second source's amplitude is
@@ -622,8 +665,10 @@ def screen(d):
     full_a = [x for x in stage_a if "without" not in x[0] and x[0]["form"] not in shafts]
     pars_a = [x for x in stage_a if "without" in x[0] and x[0]["form"] not in shafts]
     to_b = full_a[:2] + pars_a[:2]
-    to_b += [x for x in stage_a if "without" not in x[0] and x[0]["form"] in shafts][:1]
-    to_b += [x for x in stage_a if "without" in x[0] and x[0]["form"] in shafts][:1]
+    for kind in ("compliance", "backlash"):
+        drive_a = [x for x in stage_a if shafts.get(x[0]["form"], (None, None))[1] == kind]
+        to_b += [x for x in drive_a if "without" not in x[0]][:1]
+        to_b += [x for x in drive_a if "without" in x[0]][:1]
     # the best predicted swap too: a swap is another hypothesis, not a variant of the forms
     to_b += [x for x in pars_a if "swap" in x[0]][:1]
     to_b = [x for i, x in enumerate(to_b) if all(x is not y for y in to_b[:i])]
@@ -788,7 +833,7 @@ def screen(d):
             d.notes.append(unc[cand.element]["note"])
     if chosen is not results[0] and chosen.get("form") in shafts:
         d.other = list(getattr(d, "other", []) or []) + [
-            _shaft_effect(chosen, shafts, scored, cur_score)]
+            _drive_effect(chosen, shafts, scored, cur_score)]
     d.structure["chosen"] = chosen.get("form", chosen["name"])
     if chosen.get("without"):
         d.structure["without"] = chosen["without"]
@@ -972,8 +1017,8 @@ def own_orders(d, full, r, sec):
 
 
 def own_lines(own):
-    """The secondary source's own lines that the form leaves, as one number (a record,
-    not a rule): per source, run and sensor, over the orders the set without it in the
+    """The secondary source's own lines that the form leaves, as one number (the rule of
+    :data:`OWN_LINES_KEEP`): per source, run and sensor, over the orders the set without it in the
     form leaves mostly (at least ``ORDER_LEFT_SHARE`` of the line), the sum of
     share_of_gap x (left_without - left_full); the largest as {element, run, sensor,
     orders, share}, or None. A form that passes the primary's line on may explain the
@@ -983,7 +1028,10 @@ def own_lines(own):
     gap, seed-5 c05 0.97 %; phantoms seed-9 c22 2.8 % (idler_u1's order 4 estimated at
     0.049 mm for the truth's 0.12, the phantom took the rest), seed-3 c13 1.34 %, seed-2
     c07 0.2 %, seed-0 c07 0.02 %. Tried as a rule at 2 % (kept seed-8 c05's real source
-    and seed-9 c22's phantom), it does not separate them."""
+    and seed-9 c22's phantom), it does not separate them; at :data:`OWN_LINES_KEEP`
+    (5 %) it keeps only sources whose own lines no phantom came near: seed-11 c05's
+    idler_r1 (0.08 mm beside idler_u1's 0.8 mm at one frequency, orders 2, 4-6 on lc19,
+    8.0 %; every rule before dropped it: the form recovered 91 % of what it explained)."""
     sums = {}
     for o in own:
         # the orders the form leaves mostly: a few per cent of the primary's large lines (its
@@ -1026,11 +1074,17 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     for r in sorted(cands, key=lambda r: r["score"]):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
         own = [o for o in own_orders(d, full, r, sec) if o["z"] > ORDER_Z]
+        lines = own_lines(own)
+        if why is None and lines is not None and lines["share"] >= OWN_LINES_KEEP:
+            why = (f"{lines['element']}'s own lines (orders {', '.join(map(str, lines['orders']))}) that "
+                   f"'{r['form']}' leaves on {lines['sensor']} in {lines['run']} carry "
+                   f"{100 * lines['share']:.1f} % of that sensor's gap to the nominal model "
+                   f"({100 * OWN_LINES_KEEP:g} % or more keeps it)")
         if why is None:  # no run worse than the layout without the effects
             ok, w = claims.run_by_run(fit, {c.name: c.nominal for c in fit}, r["sims"], d.opt.max_worse, None)
             why = None if ok else f"{r['form']} without them {w}"
         tried.append({"name": r["name"], "score": r["score"], "sensors": rows, "accepted": why is None,
-                      "reason": why, "own_orders": own, "own_lines": own_lines(own)})
+                      "reason": why, "own_orders": own, "own_lines": lines})
         if why is None:
             break
     d.structure["parsimony"] = {"full": full.get("name"), "full_score": full.get("score"),

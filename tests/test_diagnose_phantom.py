@@ -195,7 +195,7 @@ def test_a_primary_source_is_tried_as_each_member_of_its_tie():
 
 def test_a_shaft_form_chosen_with_a_source_fewer_is_measured_against_that_set():
     from webline.diagnosis import structure
-    shafts = {"shaft on sw_leader at 6.37 Hz": ("sw_leader", 6.37)}
+    shafts = {"shaft on sw_leader at 6.37 Hz": ("sw_leader", "compliance", 6.37)}
     full = {"name": "feedforward none", "form": "feedforward none", "score": 0.276}
     without = {"name": "without idler_u1", "form": "as modelled", "without": ["idler_u1"], "score": 1.113}
     chosen = {"name": "shaft on sw_leader at 6.37 Hz, without idler_u1", "form": "shaft on sw_leader at 6.37 Hz",
@@ -204,13 +204,31 @@ def test_a_shaft_form_chosen_with_a_source_fewer_is_measured_against_that_set():
              "score": 0.45}
     # the layout's form with both sources: 0.30 (a shaft that fits worse than that with one source
     # fewer read "explains -27 %")
-    eff = structure._shaft_effect(chosen, shafts, [full, without, chosen, rigid], 0.30)
+    eff = structure._drive_effect(chosen, shafts, [full, without, chosen, rigid], 0.30)
     assert eff["explained_share"] == pytest.approx(1 - 0.383 / 1.113, rel=1e-12)
     assert "without idler_u1" in eff["explains_what"]
     assert eff["confidence"] == pytest.approx(1 - 0.383 / 0.45, rel=1e-12)
     # with every source: against the layout's form as before
-    eff = structure._shaft_effect(dict(chosen, without=None), shafts, [full, chosen], 0.30)
+    eff = structure._drive_effect(dict(chosen, without=None), shafts, [full, chosen], 0.30)
     assert eff["explained_share"] == pytest.approx(1 - 0.383 / 0.30, rel=1e-12)
+    assert eff["kind"] == "compliance" and eff["fundamental_hz"] == 6.37
+
+
+def test_a_dead_zone_form_is_reported_as_a_backlash_of_its_width():
+    """A chosen dead-zone form claims a backlash (no fundamental), its width the form's,
+    said not to be estimated, measured against the best rigid form as a shaft is."""
+    import math
+    from webline.diagnosis import structure
+    name = "feedforward none + dead zone on sw_leader"
+    forms = {name: ("sw_leader", "backlash", 1.0)}
+    rigid = {"name": "feedforward reference", "form": "feedforward reference", "score": 0.306}
+    chosen = {"name": name, "form": name, "score": 0.25}
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen], 0.567)
+    assert eff["kind"] == "backlash" and eff["element"] == "sw_leader" and eff["fundamental_hz"] is None
+    assert eff["parameters"]["backlash"]["estimated"] == pytest.approx(math.radians(1.0), rel=1e-12)
+    assert eff["parameters"]["backlash"]["identifiable"] is False
+    assert eff["confidence"] == pytest.approx(1 - 0.25 / 0.306, rel=1e-12)
+    assert eff["explained_share"] == pytest.approx(1 - 0.25 / 0.567, rel=1e-12)
 
 
 def test_own_lines_on_measured_orders():
