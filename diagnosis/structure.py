@@ -187,9 +187,14 @@ def _drive_effect(chosen, shafts, scored, cur_score):
     if chosen.get("without"):
         # a shaft chosen with a source fewer (parsimony) is measured against that set in the
         # layout's form: against the full set it read "explains -27 %" (independent seed-7 c12)
+        # a swap has no run in the layout's form: then against the best rigid form holding the
+        # same sources (independent seed-8 c24: a dead-zone form with idler_r1 in idler_u1's place
+        # read "explains -14 %" against the full set)
+        same_set = [r["score"] for r in scored if r.get("form") not in shafts
+                    and r.get("without") == chosen["without"] and r.get("swap") == chosen.get("swap")]
         cur_score = next((r["score"] for r in scored if r.get("form") == "as modelled"
                           and r.get("without") == chosen["without"] and r.get("swap") == chosen.get("swap")),
-                         cur_score)
+                         min(same_set) if same_set else cur_score)
     rigid = [r["score"] for r in scored if r.get("form") not in shafts and ("without" in r) == ("without" in chosen)]
     nxt = min(rigid) if rigid else cur_score
     same = sorted({r["form"] for r in scored if r.get("form") in shafts and r["form"] != chosen["form"]

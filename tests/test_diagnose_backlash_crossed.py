@@ -11,8 +11,10 @@ forms and parameters, simulated by the fast engine, measured through coloured
 noise; the diagnosis runs blind in a subprocess): c24, an eccentric idler_r1
 beside a 2.8 deg backlash on the leader (found), and c13, an eccentric leader
 without one, its torque swinging through zero too (nothing may be claimed).
-c24 is the case the screen was built on; seed 8's c05 and c17 (leaders with
-backlash beside eccentric idlers) are not found, see docs/diagnose.md.
+c24 is the case the screen was built on; since the seventeenth session the
+structure screen's dead-zone form ("feedforward none + dead zone on
+sw_leader") claims it first. Seed 8's c05 and c17 (leaders with backlash
+beside eccentric idlers) are not found, see docs/diagnose.md.
 """
 import pytest
 
@@ -40,12 +42,19 @@ def test_the_crossed_dead_zone_is_found_beside_the_runout(cases):
     rep = cases["c24"]["report"]
     eff = [e for e in rep["effects"] if e["kind"] == "backlash"]
     assert [e["element"] for e in eff] == ["sw_leader"], rep["verdict"]
-    rec = next(r for r in rep["backlash"] if r["element"] == "sw_leader")
-    # against the periodic effects re-estimated without it, beyond noise block by block
-    assert rec["claimed"] and rec["energy_fall"] >= 0.005 and min(rec["rise_t"].values()) <= -3.0, rec
-    # checked like every claim: no sensor's NRMSE up by more than 2 %
-    chk = eff[0]["check"]
-    assert all(chk["nrmse_after"][s] <= 1.02 * chk["nrmse_before"][s] for s in chk["nrmse_before"]), chk
+    rec = next((r for r in rep["backlash"] if r["element"] == "sw_leader"), None)
+    if rec is not None:
+        # the backlash screen's claim: against the periodic effects re-estimated without it,
+        # beyond noise block by block
+        assert rec["claimed"] and rec["energy_fall"] >= 0.005 and min(rec["rise_t"].values()) <= -3.0, rec
+    else:
+        # or the structure screen's dead-zone form (the leader's drive is then no longer ideal,
+        # and the backlash screen does not try it again)
+        assert "dead zone on sw_leader" in rep["structure"]["chosen"], rep["structure"]["chosen"]
+        assert eff[0]["check"]["accepted"], eff[0]["check"]
+    # no sensor's NRMSE up by more than 2 % (the claim check's allowance)
+    for s, g in rep["gap"].items():
+        assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], (s, g["refined"], g["nominal"])
 
 
 def test_no_dead_zone_is_claimed_beside_an_eccentric_leader(cases):

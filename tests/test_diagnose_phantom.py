@@ -229,6 +229,14 @@ def test_a_dead_zone_form_is_reported_as_a_backlash_of_its_width():
     assert eff["parameters"]["backlash"]["identifiable"] is False
     assert eff["confidence"] == pytest.approx(1 - 0.25 / 0.306, rel=1e-12)
     assert eff["explained_share"] == pytest.approx(1 - 0.25 / 0.567, rel=1e-12)
+    # chosen with a source fewer and another member in the primary's place: no run of that set in
+    # the layout's form, so against the best rigid form with the same set, not the full set
+    sw = {"replaced": "idler_u1", "by": "idler_r1"}
+    chosen = {"name": name + ", swapped", "form": name, "without": ["roller19"], "swap": sw, "score": 0.9493}
+    rigid_sw = {"name": "feedforward none, swapped", "form": "feedforward none", "without": ["roller19"],
+                "swap": sw, "score": 1.091}
+    eff = structure._drive_effect(chosen, forms, [rigid, rigid_sw, chosen], 0.8319)
+    assert eff["explained_share"] == pytest.approx(1 - 0.9493 / 1.091, rel=1e-12)
 
 
 def test_own_lines_on_measured_orders():
