@@ -107,15 +107,15 @@ SHAFT_MARGIN = 0.1   # a drive form's sum of NRMSE^2 below the best rigid form's
 DEAD_ZONE_DEG = 1.0  # dead-zone forms: total width (one; the report says the width is the form's, not estimated)
 
 
-def _shaft_clears(entries, shafts):
-    """``entries`` (screened results with the same sources) without the shaft forms
-    that do not fit :data:`SHAFT_MARGIN` better than the best rigid form among them
-    (its simulated score, else its predicted one): a shaft is a drive effect the
-    report claims, and a form that only tweaks the transfer a little is not one."""
+def _shaft_clears(entries, drive_forms):
+    """``entries`` (screened results with the same sources) without the drive forms
+    (shafts, dead zones) that do not fit :data:`SHAFT_MARGIN` better than the best rigid
+    form among them (its simulated score, else its predicted one): a drive form is a
+    drive effect the report claims, and a form that only tweaks the transfer a little is not one."""
     def sc(r):
         return r.get("score", r.get("predicted_score", math.inf))
-    rigid = min((sc(r) for r in entries if r.get("form") not in shafts), default=math.inf)
-    return [r for r in entries if r.get("form") not in shafts or sc(r) <= (1.0 - SHAFT_MARGIN) * rigid]
+    rigid = min((sc(r) for r in entries if r.get("form") not in drive_forms), default=math.inf)
+    return [r for r in entries if r.get("form") not in drive_forms or sc(r) <= (1.0 - SHAFT_MARGIN) * rigid]
 
 
 def shaft_forms(d, effs):
@@ -178,26 +178,26 @@ def dead_zone_forms(d, sims, forms):
     return out
 
 
-def _drive_effect(chosen, shafts, scored, cur_score):
-    """The compliance or backlash a chosen drive form (``shafts``: form name -> (element,
+def _drive_effect(chosen, drive_forms, scored, cur_score):
+    """The compliance or backlash a chosen drive form (``drive_forms``: form name -> (element,
     kind, torsional mode Hz or dead-zone width deg)) claims, as an effect of the report
     (the others' record shape); its confidence: how much better it fits than the best
     rigid form simulated with as many sources (or the layout's own)."""
-    el, kind, value = shafts[chosen["form"]]
+    el, kind, value = drive_forms[chosen["form"]]
     if chosen.get("without"):
-        # a shaft chosen with a source fewer (parsimony) is measured against that set in the
-        # layout's form: against the full set it read "explains -27 %" (independent seed-7 c12)
+        # a drive form chosen with a source fewer (parsimony) is measured against that set in the
+        # layout's form: against the full set it read "explains -27 %" (independent seed-7 c12);
         # a swap has no run in the layout's form: then against the best rigid form holding the
         # same sources (independent seed-8 c24: a dead-zone form with idler_r1 in idler_u1's place
         # read "explains -14 %" against the full set)
-        same_set = [r["score"] for r in scored if r.get("form") not in shafts
+        same_set = [r for r in scored if r.get("form") not in drive_forms
                     and r.get("without") == chosen["without"] and r.get("swap") == chosen.get("swap")]
-        cur_score = next((r["score"] for r in scored if r.get("form") == "as modelled"
-                          and r.get("without") == chosen["without"] and r.get("swap") == chosen.get("swap")),
-                         min(same_set) if same_set else cur_score)
-    rigid = [r["score"] for r in scored if r.get("form") not in shafts and ("without" in r) == ("without" in chosen)]
+        cur_score = next((r["score"] for r in same_set if r.get("form") == "as modelled"),
+                         min((r["score"] for r in same_set), default=cur_score))
+    rigid = [r["score"] for r in scored
+             if r.get("form") not in drive_forms and ("without" in r) == ("without" in chosen)]
     nxt = min(rigid) if rigid else cur_score
-    same = sorted({r["form"] for r in scored if r.get("form") in shafts and r["form"] != chosen["form"]
+    same = sorted({r["form"] for r in scored if r.get("form") in drive_forms and r["form"] != chosen["form"]
                    and r["score"] <= chosen["score"] + AS_WELL * max(cur_score - chosen["score"], 1e-12)})
     gain = (cur_score - chosen["score"]) / cur_score if cur_score > 0 else 0.0
     explains = ("sum of the load cells' NRMSE^2 over the fit runs (as a model form, with the effects"
@@ -636,7 +636,7 @@ def screen(d):
     sf = shaft_forms(d, [e for e in effs if e[2] is not None])
     # ... and dead zones in the drives the periodic sources swing through zero
     sf += dead_zone_forms(d, cur_sims, alts) if effs else []
-    shafts = {name: sh for name, _, _, sh in sf}
+    drive_forms = {name: sh for name, _, _, sh in sf}
     alts += [(name, desc, sets) for name, desc, sets, _ in sf]
     # the full set is screened in the other forms too: a second source's amplitude is
     # what the layout's form needs to carry the first source's lines to the other zone,
@@ -667,11 +667,11 @@ def screen(d):
     stage_a.sort(key=lambda x: x[0]["predicted_score"])
     # the shaft forms apart: the best of them is simulated too, never in a rigid form's place
     # (a shaft must beat the rigid forms simulated, SHAFT_MARGIN)
-    full_a = [x for x in stage_a if "without" not in x[0] and x[0]["form"] not in shafts]
-    pars_a = [x for x in stage_a if "without" in x[0] and x[0]["form"] not in shafts]
+    full_a = [x for x in stage_a if "without" not in x[0] and x[0]["form"] not in drive_forms]
+    pars_a = [x for x in stage_a if "without" in x[0] and x[0]["form"] not in drive_forms]
     to_b = full_a[:2] + pars_a[:2]
     for kind in ("compliance", "backlash"):
-        drive_a = [x for x in stage_a if shafts.get(x[0]["form"], (None, None))[1] == kind]
+        drive_a = [x for x in stage_a if drive_forms.get(x[0]["form"], (None, None, None))[1] == kind]
         to_b += [x for x in drive_a if "without" not in x[0]][:1]
         to_b += [x for x in drive_a if "without" in x[0]][:1]
     # the best predicted swap too: a swap is another hypothesis, not a variant of the forms
@@ -727,7 +727,7 @@ def screen(d):
     # whatever its prediction: does that form need them? (independent seed-10 c19: the full set
     # fitted 0.16 in 'feedforward none + web damping 2 ms', every form predicted alike, and the
     # two forms simulated without the phantom idler_u1 were the single feed-forward ones)
-    full_b = [r for r in results if "without" not in r and r.get("form") not in shafts]
+    full_b = [r for r in results if "without" not in r and r.get("form") not in drive_forms]
     if sec_fes and full_b:
         f_best = min(full_b, key=lambda r: r["score"]).get("form")
         x = next((x for x in pars_a if x[0].get("form") == f_best and "swap" not in x[0]
@@ -748,7 +748,7 @@ def screen(d):
     for r in results + [x[0] for x in not_b]:
         sw = r.get("swap") or {}
         same.setdefault(("without" in r, sw.get("replaced"), sw.get("by")), []).append(r)
-    cleared = [r for grp in same.values() for r in _shaft_clears(grp, shafts)]
+    cleared = [r for grp in same.values() for r in _shaft_clears(grp, drive_forms)]
     pars_ok = [r for r in cleared if "without" in r]
     full_scored = [r for r in cleared if "without" not in r and "score" in r]
     best = min(full_scored, key=lambda r: r["score"])
@@ -836,9 +836,9 @@ def screen(d):
                 f"{1e6 * hi:.0f} um; a run at another line speed (the forms' gains differ most at the "
                 f"effect's frequency) or with a tension set-point step would tell them apart")
             d.notes.append(unc[cand.element]["note"])
-    if chosen is not results[0] and chosen.get("form") in shafts:
+    if chosen is not results[0] and chosen.get("form") in drive_forms:
         d.other = list(getattr(d, "other", []) or []) + [
-            _drive_effect(chosen, shafts, scored, cur_score)]
+            _drive_effect(chosen, drive_forms, scored, cur_score)]
     d.structure["chosen"] = chosen.get("form", chosen["name"])
     if chosen.get("without"):
         d.structure["without"] = chosen["without"]
