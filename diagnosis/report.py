@@ -203,7 +203,9 @@ def _harmonic_entry(b, X, j):
         if not identifiable_range(lo, hi):
             out["identifiable"] = False
             out["identifiable_basis"] = (f"lines within the data sheet's tolerances need {1e6 * lo:.3g}-"
-                                         f"{1e6 * hi:.3g} um (more than a factor {NOT_IDENTIFIABLE:g})")
+                                         f"{1e6 * hi:.3g} um (more than a factor {NOT_IDENTIFIABLE:g})"
+                                         + (f", split with {', '.join(lr['shared_with'])} at one frequency"
+                                            if lr.get("shared_with") else ""))
     if j + 1 in (b.get("transfer_dropped") or ()):
         out["in_refined_layout"] = False   # its held-out prediction does not carry (report.transfer)
     return out

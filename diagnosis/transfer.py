@@ -269,6 +269,66 @@ def amplitude_ranges(M, G, cand, orders, fit, X, X0):
     return out
 
 
+def same_frequency_groups(plan, fit):
+    """Indices of ``plan`` (cand, orders, X, X0) grouped by fundamental: candidates
+    whose mean frequencies agree within the fit runs' resolution (1 / T) on every fit
+    run turn at one speed, and each order of one lands on the same order of the others."""
+    def together(a, b):
+        fs = [(c.freq.get(a.key), c.freq.get(b.key), c.T) for c in fit]
+        fs = [(x, y, T) for x, y, T in fs if x and y]
+        return bool(fs) and all(abs(x - y) < 1.0 / T for x, y, T in fs)
+    groups = []
+    for i, (cand, *_rest) in enumerate(plan):
+        for g in groups:
+            if together(plan[g[0]][0], cand):
+                g.append(i)
+                break
+        else:
+            groups.append([i])
+    return [g for g in groups if len(g) > 1]
+
+
+def joint_amplitude_ranges(M, G, members, fit):
+    """:func:`amplitude_ranges` for sources at one frequency (independent seed-11 c17:
+    two rollers of one radius, 0.56 and 0.15 mm at order 1; reported 0.52 and 0.089
+    mm, the second 39 % low, not flagged). Their lines add on every sensor, so each
+    line of the ensemble splits the measured harmonics between them by least squares,
+    ``m = sum_e a_e g_e`` over sensors and fit runs (``g_e``: that line's response to
+    source e alone), and source e needs ``|X0_e + a_e dX_e|``. With as many sources as
+    sensors the split is exact in every line and rests wholly on the responses; the
+    range over the lines is then what these runs know of each source's amplitude.
+
+    ``M`` = measured harmonics on the first member's angle over the union of orders;
+    ``G`` = [per line: [per member: responses on that angle]]; ``members`` = [(cand,
+    orders, X, X0)]. Returns {element: {order: {"range", "by_line", "chi2"}}}."""
+    ref = members[0][0]
+    union = sorted({j for _c, orders, _X, _X0 in members for j in orders})
+    out = {cand.element: {} for cand, *_r in members}
+    for i, j in enumerate(union):
+        m, wm = _vec(M, fit, fit, ref, i, j)
+        on = [e for e, (_c, orders, X, X0) in enumerate(members) if j in orders and abs(X[j - 1]) > 0]
+        if len(m) == 0 or not on:
+            continue
+        amps, chi2 = {e: [] for e in on}, []
+        for Gk in G:
+            A = np.column_stack([_vec(Gk[e], fit, fit, ref, i, j)[0] for e in on])
+            sw = np.sqrt(wm)
+            if A.shape[0] != len(m) or not np.all(np.isfinite(A)):
+                continue
+            a = np.linalg.lstsq(sw[:, None] * A, sw * m, rcond=None)[0]
+            chi2.append(float(np.sum(wm * np.abs(m - A @ a) ** 2)))
+            for e, ae in zip(on, a):
+                _c, _o, X, X0 = members[e]
+                amps[e].append(abs(X0[j - 1] + ae * (X[j - 1] - X0[j - 1])))
+        for e in on:
+            ok = [a for a in amps[e] if np.isfinite(a) and a > 0]
+            if ok:
+                out[members[e][0].element][int(j)] = {"range": [float(min(ok)), float(max(ok))],
+                                                      "by_line": [float(a) for a in amps[e]], "chi2": chi2,
+                                                      "shared_with": [members[q][0].element for q in on if q != e]}
+    return out
+
+
 def order_verdicts(d, M, G, H, cand, orders, fit, hold, prior):
     """Per order and held-out run: the weighted share of lines in which the order
     helps the prediction, and the numbers behind it. ``M`` = measured harmonics
@@ -360,22 +420,44 @@ def screen(d):
         orders = [j + 1 for j in np.flatnonzero(np.abs(X - base_X) > 0)]
         if orders:
             plan.append((cand, orders, X, base_X))
+    # sources at one frequency: per line, the fit runs once more without each member but
+    # the last (whose response is the rest, as the estimate's own responses are linear)
+    shared = same_frequency_groups(plan, fit)
     # one line at a time: only its harmonics are kept (a line's simulations of 60 s
     # records at 1 kHz are ~100 MB, and there are 2 per run and line)
     G, H, failed, before, M = {}, {}, set(), None, None
+    GJ, MJ = {}, {}
     for k, dk in enumerate(docs):
         jobs = [(c.run, dd, f"transfer line {k} {which}")
                 for which, dd in (("with", dk), ("without", without_effects(d, dk, effs))) for c in d.ctx]
+        n = len(d.ctx)
+        solo = [(g, e) for g in range(len(shared)) for e in shared[g][:-1]]
+        for g, e in solo:
+            cand, _o, X, _X0 = plan[e]
+            dd = without_effects(d, dk, [(cand, X)])
+            jobs += [(c.run, dd, f"transfer line {k} without {cand.element}") for c in fit]
         sims = d.model.simulate_many(jobs)
         if any(isinstance(x, Exception) for x in sims):
             failed.add(k)
             continue
-        n = len(d.ctx)
         w = {c.name: sim for c, sim in zip(d.ctx, sims[:n])}
-        wo = {c.name: sim for c, sim in zip(d.ctx, sims[n:])}
+        wo = {c.name: sim for c, sim in zip(d.ctx, sims[n:2 * n])}
         for cand, orders, _X, _X0 in plan:
             G.setdefault(cand.element, {})[k] = responses(d, fit, w, wo, cand, orders)
             H.setdefault(cand.element, {})[k] = responses(d, hold, w, wo, cand, orders)
+        for g, idx in enumerate(shared):
+            ref = plan[idx[0]][0]
+            union = sorted({j for e in idx for j in plan[e][1]})
+            per = []
+            for e in idx[:-1]:
+                at = 2 * n + solo.index((g, e)) * len(fit)
+                wo_e = {c.name: sim for c, sim in zip(fit, sims[at:at + len(fit)])}
+                per.append(responses(d, fit, w, wo_e, ref, union))
+            total = responses(d, fit, w, wo, ref, union)
+            per.append({r: {s: total[r][s] - sum(p[r][s] for p in per) for s in total[r]} for r in total})
+            GJ.setdefault(g, {})[k] = per
+            if k == 0:
+                MJ[g] = measured(d, fit, w, wo, ref, union)
         if k == 0:
             before = wo
             M = {cand.element: measured(d, fit, w, wo, cand, orders) for cand, orders, _X, _X0 in plan}
@@ -388,15 +470,24 @@ def screen(d):
     prior = np.array([1.0 / n_groups / sum(1 for q in ks if groups[q] == groups[k]) for k in ks])
     ranges = {cand.element: amplitude_ranges(M[cand.element], [G[cand.element][k] for k in ks], cand, orders,
                                              fit, X, X0) for cand, orders, X, X0 in plan}
+    for g, idx in enumerate(shared):
+        joint = joint_amplitude_ranges(MJ[g], [GJ[g][k] for k in ks], [plan[e] for e in idx], fit)
+        for el, rg in joint.items():
+            ranges[el].update(rg)
     for fe in d.final_effects:
         b = fe["ranked"][0]
         b["lines_range"] = rg = ranges.get(b["cand"].element) or {}
         j = int(np.argmax(np.abs(b["X"]))) + 1
         lo, hi = (rg.get(j) or {}).get("range", (0.0, 0.0))
         if hi > 0 and not structure.identifiable_range(lo, hi):
+            mates = (rg.get(j) or {}).get("shared_with")
+            settle = (f"{b['cand'].element} shares its frequency with {', '.join(mates)}, so the split between "
+                      f"them rests on the line's response to each; a dial-gauge reading of one of them, or a "
+                      f"load cell between them, would settle it" if mates else
+                      "a run at another line speed would tell them apart")
             d.notes.append(f"the amplitude of {b['cand'].element}'s order {j} is not identifiable from these runs: "
                            f"lines within the data sheet's tolerances need {1e6 * lo:.3g}-{1e6 * hi:.3g} um "
-                           f"to fit them; a run at another line speed would tell them apart")
+                           f"to fit them; {settle}")
     verdicts = []
     for cand, orders, _X, _X0 in (plan if hold else []):
         verdicts += order_verdicts(d, M[cand.element], [G[cand.element][k] for k in ks],

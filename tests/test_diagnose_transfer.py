@@ -284,3 +284,38 @@ def test_a_ramped_held_out_run_is_judged_window_by_window():
     # a steady held-out run is judged whole
     c2 = SimpleNamespace(**{**vars(c), "mask": t > 1})
     assert transfer.windows(d, [c2]) == [c2]
+
+
+def test_two_sources_at_one_frequency_are_split_line_by_line():
+    """Two rollers of one radius on two load cells: each line of the ensemble splits
+    the measured harmonic between them by solving m = a1 g1 + a2 g2 (2 sensors, 2
+    sources: exact). Line 0 answers as the estimate (a = 1, 1); line 1's response to
+    the second source is 30 % weaker on lc19 and 20 % stronger on lc9, and the split
+    it needs is the 2x2 solve by hand. The dominant source barely moves; the small
+    one, whose pattern is close to the first's, moves a lot."""
+    X1 = np.array([5e-4 + 0j])
+    X2 = np.array([1.5e-4 * np.exp(1.0j)])
+    g1 = np.array([2.0 + 0.5j, 0.8 + 0.1j])     # lc9, lc19 per unit of X1's estimate
+    g2 = np.array([0.9 + 0.3j, 0.5 + 0.05j])
+    m = g1 + g2
+    g2b = g2 * np.array([1.2, 0.7])
+    A = np.column_stack([g1, g2b])
+    a = np.linalg.solve(A, m)
+    c2 = SimpleNamespace(key=KEY, element="roller19", kind="eccentricity")
+    members = [(CAND, [1], X1, np.zeros(1, complex)), (c2, [1], X2, np.zeros(1, complex))]
+    G = [[_resp(FIT, g1), _resp(FIT, g2)], [_resp(FIT, g1), _resp(FIT, g2b)]]
+    got = transfer.joint_amplitude_ranges(_resp(FIT, m), G, members, [FIT])
+    assert got["roller9"][1]["by_line"] == pytest.approx([5e-4, abs(a[0]) * 5e-4], rel=1e-9)
+    assert got["roller19"][1]["by_line"] == pytest.approx([1.5e-4, abs(a[1]) * 1.5e-4], rel=1e-9)
+    assert got["roller19"][1]["shared_with"] == ["roller9"]
+    assert got["roller9"][1]["chi2"] == pytest.approx([0.0, 0.0], abs=1e-9)
+
+
+def test_only_sources_turning_at_one_speed_are_grouped():
+    """Two candidates whose frequencies differ by less than 1/T on every fit run are
+    one group; one 1.5/T away (separable over the record) is not."""
+    def cand(key):
+        return SimpleNamespace(key=key, element=key, kind="eccentricity")
+    fit = [SimpleNamespace(T=40.0, freq={"a": 3.6460, "b": 3.6465, "c": 3.6460 + 1.5 / 40.0})]
+    plan = [(cand(k), [1], None, None) for k in "abc"]
+    assert transfer.same_frequency_groups(plan, fit) == [[0, 1]]
