@@ -188,3 +188,29 @@ def test_an_unwind_shaft_is_sought_on_the_load_cell_and_in_the_form_the_rigid_li
     found = [e for e in rep["effects"] if e["kind"] == "compliance"]
     assert [e["element"] for e in found] == ["unwind"] and rec["claimed"] == "unwind"
     assert found[0]["model_form"] == best["form"] and found[0]["check"]["accepted"]
+
+
+def test_a_hump_in_a_held_out_run_is_not_read_for_a_shaft(monkeypatch):
+    """A shaft is estimated from the hump it reproduces, so only the fit runs' humps
+    are tried (independent seed-12 c16: a hump in the held-out ramp, an eccentric
+    roller's line swept by the ramp, was claimed as a rewind shaft). The held-out
+    run's hump stays a finding of the report; the fit run's is tried."""
+    from types import SimpleNamespace
+    from webline.diagnosis import claims, others
+    fit, hold = SimpleNamespace(name="run1", fit=True), SimpleNamespace(name="run2", fit=False)
+    d = SimpleNamespace(ctx=[fit, hold], fit_ctx=lambda: [fit], noise={}, refined_doc={},
+                        steps=[{"sims": {}}])
+    hump = {"kind": "unexplained resonance", "sensor": "lc19.T", "frequency_hz": 4.25, "band_hz": [0.5, 19.0],
+            "share_of_residual": 0.36}
+    monkeypatch.setattr(ripple, "screen", lambda d, noise: {"run1": {}, "run2": {}})
+    monkeypatch.setattr(compliance, "missed_bands", lambda d, noise: [])
+    monkeypatch.setattr(others, "non_ideal_drives", lambda d: set())
+    monkeypatch.setattr(others, "drive_candidates", lambda d: [("rewind", None)])
+    tried = []
+    monkeypatch.setattr(compliance, "spectral_fit", lambda d, noise, doc, sims, h, G=None: tried.append(h["run"]))
+    monkeypatch.setattr(claims, "humps", lambda d, noise, ripple_fit=None: [{**hump, "run": "run2"}])
+    compliance.screen(d)
+    assert tried == [] and d.compliance == []
+    monkeypatch.setattr(claims, "humps", lambda d, noise, ripple_fit=None: [{**hump, "run": "run1"}])
+    compliance.screen(d)
+    assert tried == ["run1"]
