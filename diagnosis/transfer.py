@@ -325,7 +325,9 @@ def joint_amplitude_ranges(M, G, members, fit):
             if ok:
                 out[members[e][0].element][int(j)] = {"range": [float(min(ok)), float(max(ok))],
                                                       "by_line": [float(a) for a in amps[e]], "chi2": chi2,
-                                                      "shared_with": [members[q][0].element for q in on if q != e]}
+                                                      "shared_with": [members[q][0].element for q in on if q != e],
+                                                      # as many unknowns as (run, sensor) lines: an exact fit
+                                                      "exact": len(m) <= len(on)}
     return out
 
 
@@ -474,6 +476,16 @@ def screen(d):
         joint = joint_amplitude_ranges(MJ[g], [GJ[g][k] for k in ks], [plan[e] for e in idx], fit)
         for el, rg in joint.items():
             ranges[el].update(rg)
+        exact = sorted({j for rg in joint.values() for j, v in rg.items() if v.get("exact")})
+        if exact:
+            els = [plan[e][0].element for e in idx]
+            d.notes.append(
+                f"{' and '.join(els)} turn at one frequency and the fit runs give as many lines per order as "
+                f"they have unknowns (orders {', '.join(map(str, exact))}): together they fit those lines "
+                f"exactly whatever the line's response, so the data do not test that they are "
+                f"{len(els)} sources rather than one whose line the model passes on wrongly; their split "
+                f"and their held-out prediction rest on the model's response alone. A fit run at another "
+                f"line speed would test it")
     for fe in d.final_effects:
         b = fe["ranked"][0]
         b["lines_range"] = rg = ranges.get(b["cand"].element) or {}

@@ -309,6 +309,7 @@ def test_two_sources_at_one_frequency_are_split_line_by_line():
     assert got["roller19"][1]["by_line"] == pytest.approx([1.5e-4, abs(a[1]) * 1.5e-4], rel=1e-9)
     assert got["roller19"][1]["shared_with"] == ["roller9"]
     assert got["roller9"][1]["chi2"] == pytest.approx([0.0, 0.0], abs=1e-9)
+    assert got["roller9"][1]["exact"] and got["roller19"][1]["exact"]   # 2 sensors, 2 sources
 
 
 def test_only_sources_turning_at_one_speed_are_grouped():
