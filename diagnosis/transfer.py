@@ -310,9 +310,9 @@ def joint_amplitude_ranges(M, G, members, fit):
         if len(m) == 0 or not on:
             continue
         amps, chi2 = {e: [] for e in on}, []
+        sw = np.sqrt(wm)
         for Gk in G:
             A = np.column_stack([_vec(Gk[e], fit, fit, ref, i, j)[0] for e in on])
-            sw = np.sqrt(wm)
             if A.shape[0] != len(m) or not np.all(np.isfinite(A)):
                 continue
             a = np.linalg.lstsq(sw[:, None] * A, sw * m, rcond=None)[0]
@@ -425,6 +425,9 @@ def screen(d):
     # sources at one frequency: per line, the fit runs once more without each member but
     # the last (whose response is the rest, as the estimate's own responses are linear)
     shared = same_frequency_groups(plan, fit)
+    n = len(d.ctx)
+    solo = [(g, e) for g in range(len(shared)) for e in shared[g][:-1]]
+    at = {ge: 2 * n + i * len(fit) for i, ge in enumerate(solo)}   # where each one's fit runs sit in a line's jobs
     # one line at a time: only its harmonics are kept (a line's simulations of 60 s
     # records at 1 kHz are ~100 MB, and there are 2 per run and line)
     G, H, failed, before, M = {}, {}, set(), None, None
@@ -432,8 +435,6 @@ def screen(d):
     for k, dk in enumerate(docs):
         jobs = [(c.run, dd, f"transfer line {k} {which}")
                 for which, dd in (("with", dk), ("without", without_effects(d, dk, effs))) for c in d.ctx]
-        n = len(d.ctx)
-        solo = [(g, e) for g in range(len(shared)) for e in shared[g][:-1]]
         for g, e in solo:
             cand, _o, X, _X0 = plan[e]
             dd = without_effects(d, dk, [(cand, X)])
@@ -452,8 +453,7 @@ def screen(d):
             union = sorted({j for e in idx for j in plan[e][1]})
             per = []
             for e in idx[:-1]:
-                at = 2 * n + solo.index((g, e)) * len(fit)
-                wo_e = {c.name: sim for c, sim in zip(fit, sims[at:at + len(fit)])}
+                wo_e = {c.name: sim for c, sim in zip(fit, sims[at[g, e]:at[g, e] + len(fit)])}
                 per.append(responses(d, fit, w, wo_e, ref, union))
             total = responses(d, fit, w, wo, ref, union)
             per.append({r: {s: total[r][s] - sum(p[r][s] for p in per) for s in total[r]} for r in total})
