@@ -625,6 +625,10 @@ def case_targets(truth, report, score=None):
               "found": any(m["kind"] == t["kind"] and m["element"] == t["element"] for m in kept)}
              for t in truth["effects"]]
     drive = [f for f in found if f["kind"] in B.DRIVE_KINDS]
+    # shafts the report names as possible but does not claim (compliance.refused): not a find,
+    # counted beside the recall, with those on a drive that has no hidden shaft
+    possible = [f.get("element") for f in (report or {}).get("findings") or [] if f.get("kind") == "possible drive shaft"]
+    shafts = {t["element"] for t in truth["effects"] if t["kind"] == "compliance"}
     return {
         "true": score["n_true"], "reported": len(reported), "matched": len(kept), "other_reports": other,
         "ambiguous": sum(m["mode"] == "ambiguous" for m in kept),
@@ -640,6 +644,7 @@ def case_targets(truth, report, score=None):
         "invented_any": len(everything) if noise_only else 0,
         "drive": drive,
         "effects": found,
+        "possible_shafts": {"named": len(possible), "on_a_hidden_shaft": sum(e in shafts for e in possible)},
     }
 
 
@@ -663,6 +668,7 @@ def target_scores(results):
     diagnosed = 0
     drive = {"true": 0, "matched": 0, "detectable": 0, "matched_detectable": 0, "unknown": 0}
     every = dict(drive)
+    possible = {"named": 0, "on_a_hidden_shaft": 0}
     for res in results:
         tr, rep = res["truth"], res.get("report")
         if rep is None:
@@ -688,6 +694,8 @@ def target_scores(results):
                 if v and v["closed_share"] is not None:
                     lst.append(v["closed_share"])
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
+        for k in possible:
+            possible[k] += c["possible_shafts"][k]
         for dv in c["effects"]:
             for d in (every, drive) if dv["kind"] in B.DRIVE_KINDS else (every,):
                 d["true"] += 1
@@ -721,7 +729,8 @@ def target_scores(results):
         # beside the headline (all effects): drive-effect recall over all hidden drive effects
         # and over those the data can show at all (B.effect_detectable; unknown ones left out)
         "drive": {**drive, "recall": B._ratio(drive["matched"], drive["true"]),
-                  "recall_detectable": B._ratio(drive["matched_detectable"], drive["detectable"])},
+                  "recall_detectable": B._ratio(drive["matched_detectable"], drive["detectable"]),
+                  "possible_shafts": possible},
         # the same over every hidden effect: what a method could reach on these data
         "detectable": {**every, "recall": B._ratio(every["matched"], every["true"]),
                        "recall_detectable": B._ratio(every["matched_detectable"], every["detectable"])},
@@ -782,12 +791,20 @@ def target_rows(s):
         ("recall over the hidden effects the data can show (each measured: truth with and without it)",
          _recall_cell(s.get("detectable") or {}), "-", "detectable_recall"),
         ("drive effects (backlash, compliance): recall over all hidden / over the detectable only",
-         _recall_cell(s.get("drive") or {}), "-", "drive_recall"),
+         _recall_cell(s.get("drive") or {}) + _possible_cell((s.get("drive") or {}).get("possible_shafts")),
+         "-", "drive_recall"),
         ("periodic sources invented on noise-only records",
          f"{no['invented_periodic']} in {no['records']} records ({no['ramped_records']} ramped) of {no['cases']} cases"
          + (f" ({no['invented_any']} findings of any kind)" if no["invented_any"] else ""),
          "0", "no_invented_periodic"),
     ]
+
+
+def _possible_cell(p):
+    """'; N shafts named possible, not claimed (k on a drive with a hidden shaft)', or ''."""
+    if not p or not p.get("named"):
+        return ""
+    return f"; {p['named']} shaft(s) named possible, not claimed ({p['on_a_hidden_shaft']} on a hidden shaft)"
 
 
 def _recall_cell(d):

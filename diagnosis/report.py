@@ -82,7 +82,8 @@ def build(d):
     rf = (done[1] if done is not None and done[0] is d.refined_doc else ripple.screen(d, d.noise)) \
         if d.opt.ripple else {}
     rep["ripple"] = {r: {"levels_Nm_per_rtHz": v["levels_Nm_per_rtHz"]} for r, v in rf.items()} or None
-    rep["findings"] = compliance.label(claims.humps(d, d.noise, ripple_fit=rf), getattr(d, "compliance", None))
+    recs = getattr(d, "compliance", None)
+    rep["findings"] = compliance.refused(recs) + compliance.label(claims.humps(d, d.noise, ripple_fit=rf), recs)
     rep["compliance"] = getattr(d, "compliance", None)
     rep["backlash"] = getattr(d, "backlash", None)
     rep["rejected"] = _rejected(d)

@@ -49,6 +49,21 @@ def test_label_says_which_hump_a_claimed_shaft_reproduces():
     assert out[0]["rigid_form"] == "feedforward reference"
 
 
+def test_a_shaft_refused_within_noise_is_a_finding_once_per_drive_and_not_beyond_noise():
+    def rec(element, f, t, rise=0.0019):
+        return {"hump": {"kind": "spectral misfit", "run": "run1", "sensor": "lc9.T", "frequency_hz": f,
+                         "band_hz": [0.5 * f, 2.0 * f], "share_of_residual": None},
+                "claimed": None, "tried": [], "rigid": {"form": "as modelled"},
+                "refused": {"element": element, "torsional_hz": f, "explained": 0.82, "misfit": 0.064,
+                            "rigid_misfit": 0.53, "sensor": "lc9.T", "rise": rise, "rise_t": t}}
+    out = compliance.refused([rec("unwind", 10.0, 1.9), rec("unwind", 6.3, 1.9),
+                              rec("rewind", 7.0, compliance.RISE_T + 0.1), {"hump": {}, "claimed": "x"}])
+    assert [(f["element"], f["frequency_hz"]) for f in out] == [("unwind", 10.0)]
+    assert out[0]["kind"] == "possible drive shaft"
+    assert "near 10 Hz" in out[0]["text"] and "5-20 Hz" in out[0]["text"] and "0.19 %" in out[0]["text"]
+    assert compliance.refused(None) == []
+
+
 def _case(tmp_path, with_shaft, ripple_x=RIPPLE_X, seed=0):
     doc = B.derive_line()
     facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))

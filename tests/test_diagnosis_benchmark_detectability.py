@@ -144,7 +144,17 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     assert s["drive"]["recall"] == 0.5 and s["drive"]["recall_detectable"] == 1.0
     assert s["recall"] == 0.5  # the headline stays over all effects
     row = next(r for r in BI.target_rows(s) if r[3] == "drive_recall")
-    assert "all: 50 % (1/2); detectable only: 100 % (1/1)" in row[1]
+    assert "all: 50 % (1/2); detectable only: 100 % (1/1)" in row[1] and "named possible" not in row[1]
+    # a shaft named possible but not claimed is no find; counted beside, with those on a drive
+    # without a hidden shaft
+    other = next(e for e in ("unwind", "rewind", "sw_leader") if e != el)
+    rep_p = {"effects": [], "findings": [{"kind": "possible drive shaft", "element": el},
+                                         {"kind": "possible drive shaft", "element": other},
+                                         {"kind": "unexplained resonance", "element": None}]}
+    sp = BI.target_scores([{"truth": t2, "report": rep_p}])
+    assert sp["drive"]["matched"] == 0 and sp["drive"]["possible_shafts"] == {"named": 2, "on_a_hidden_shaft": 1}
+    row = next(r for r in BI.target_rows(sp) if r[3] == "drive_recall")
+    assert row[1].endswith("; 2 shaft(s) named possible, not claimed (1 on a hidden shaft)")
     # every kind: a periodic effect found as an element it cannot be told from counts, one
     # the data cannot show leaves the recall over the detectable ones alone
     ecc = {"kind": "eccentricity", "element": "idler_r1", "indistinguishable": ["idler_r1", "roller19"],
