@@ -64,6 +64,40 @@ def test_a_shaft_refused_within_noise_is_a_finding_once_per_drive_and_not_beyond
     assert compliance.refused(None) == []
 
 
+def test_the_reported_sources_lines_leave_the_residual_and_a_broad_hump_stays():
+    """Two speed levels (a ramp run's fit window), a source's lines of other amplitudes on
+    each, a lightly damped hump rung by white noise: the lines go down to the noise, the
+    hump keeps its energy but for the slices under the lines."""
+    from types import SimpleNamespace
+    from scipy import signal
+    fs, T = 500.0, 60.0
+    t = np.arange(0.0, T, 1.0 / fs)
+    rng = np.random.default_rng(3)
+    f1 = np.where(t < 30.0, 3.46, 4.33)                       # the source's frequency, level by level
+    th = 2 * np.pi * np.cumsum(f1) / fs
+    mask = (t > 1.0) & ((t < 27.0) | (t > 33.0))              # the ramp between the levels left out
+    amp = np.where(t < 30.0, 0.4, 0.25)
+    lines = amp * (np.cos(4 * th + 0.3) + 0.5 * np.sin(2 * th))
+    b, a = signal.iirpeak(11.3, 11.3 / (2 * 0.05), fs)
+    hump = signal.lfilter(b, a, rng.normal(0.0, 1.0, len(t)))
+    white = rng.normal(0.0, 0.05, len(t))
+    cand = SimpleNamespace(key="guide_in:ecc", element="guide_in")
+    d = SimpleNamespace(final_effects=[{"ranked": [{"cand": cand}]}])
+    c = SimpleNamespace(name="run1", mask=mask, fs=fs, theta={"guide_in:ecc": th})
+    got = compliance.line_free(d, c, lines + hump + white)
+    assert len(got) == mask.sum()
+    f, p_got = ripple.welch(got, fs)
+    _, p_ref = ripple.welch((hump + white)[mask], fs)
+    for fl in (4 * 3.46, 4 * 4.33, 2 * 3.46, 2 * 4.33):      # a line: down to what is there without it
+        k = np.argmin(abs(f - fl))
+        assert p_got[k] < 2.0 * p_ref[k]
+    band = (f > 9.0) & (f < 14.0)
+    assert np.sum(p_got[band]) == pytest.approx(np.sum(p_ref[band]), rel=0.1)
+    # nothing reported: the residual over the window as it was
+    d0 = SimpleNamespace(final_effects=[])
+    assert np.array_equal(compliance.line_free(d0, c, lines + white), (lines + white)[mask])
+
+
 def _case(tmp_path, with_shaft, ripple_x=RIPPLE_X, seed=0):
     doc = B.derive_line()
     facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
