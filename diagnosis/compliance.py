@@ -133,8 +133,14 @@ def spectral_fit(d, noise, doc, sims, hump, G=None):
     band = band_of(hump, c.fs)
     m = (f >= band[0]) & (f <= band[1])
     P, S0 = {}, {}
+    # a missed band is read without the sources' lines (line_free); a hump's scan keeps the
+    # residual as it was: on independent seed-9 c24 the line-free residual moved the leader
+    # shaft found from the 4.5 Hz hump (band 0.5-11.25 Hz) from 10.6 to 8.7 Hz, the truth's
+    # mode at 10.5 Hz (not understood; the hump path's finds are left as they were)
+    bands_only = hump.get("kind") == "spectral misfit"
     for s in c.sensors:
-        _, p = ripple.welch(line_free(d, c, c.meas[s] - sims[c.name].columns[s]), c.fs)
+        r = c.meas[s] - sims[c.name].columns[s]
+        _, p = ripple.welch(line_free(d, c, r) if bands_only else r[c.mask], c.fs)
         P[s] = ripple.fine(p, f)
         S0[s] = noise[c.name][s]["psd_N2_per_hz"]
     Gx = dict(G[c.name])
