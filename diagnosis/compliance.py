@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from webline.diagnosis import claims, others, regress, ripple
+from webline.diagnosis import estimate as est
 
 log = logging.getLogger("webline.diagnose")
 
@@ -81,12 +82,11 @@ def _line_basis(d, c):
         for k in keys:
             th = np.asarray(c.theta[k], float)[b]
             f = abs(th[-1] - th[0]) / (2 * math.pi) / max((len(b) - 1) / c.fs, 1e-9)
-            if f <= 0:
-                continue
-            for n in range(1, int(min(LINES_TOP_HZ, 0.45 * c.fs) / f) + 1):
-                cols += [np.cos(n * th), np.sin(n * th)]
-        if cols and len(cols) < len(b) // 4:
-            out.append((b, np.linalg.qr(np.column_stack(cols))[0]))
+            if f > 0:
+                cols.append(est.harmonic_basis(th, range(1, int(min(LINES_TOP_HZ, 0.45 * c.fs) / f) + 1)))
+        X = np.hstack(cols) if cols else np.empty((len(b), 0))
+        if 0 < X.shape[1] < len(b) // 4:
+            out.append((b, np.linalg.qr(X)[0]))
     cache[c.name] = (idx, out)
     return cache[c.name]
 
