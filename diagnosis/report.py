@@ -438,8 +438,9 @@ def _rejected(d):
             why = []
             if not e["log10_p"] < opt.significance:
                 why.append(f"log10 p {e['log10_p']:.3g} >= {opt.significance:g}")
-            if e["share"] < opt.min_share:
-                why.append(f"share {100 * e['share']:.2g} % < {100 * opt.min_share:g} %")
+            if e.get("share_left", e["share"]) < opt.min_share:
+                why.append(f"share {100 * e.get('share_left', e['share']):.2g} % of the residual left "
+                           f"< {100 * opt.min_share:g} %")
             if e["coherence"] < opt.min_coherence:
                 why.append(f"coherence {e['coherence']:.2f} < {opt.min_coherence:g}")
             if not why:
