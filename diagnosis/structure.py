@@ -736,12 +736,16 @@ def screen(d):
             stage_b(*x)
             to_b.append(x)
     not_b = [x for x in stage_a if all(x is not y for y in to_b)]
+    top = min((x[0] for x in to_b if "predicted_score" in x[0]), key=lambda e: e["predicted_score"], default=None)
     for entry, alt0, X1s, Gs in not_b:
         entry["X"] = X1s   # the estimate in that form (predicted, not simulated)
         d.rejected.append({"element": entry["name"], "kind": "structure", "stage": "structure screen",
-                           "reason": f"predicted sum of NRMSE^2 {entry['predicted_score']:.4g}, not among the "
-                                     f"two best ({', '.join(x[0]['name'] for x in to_b)})",
-                           "predicted_nrmse": entry["predicted_nrmse"]})
+                           "reason": f"predicted sum of NRMSE^2 {entry['predicted_score']:.4g}, not simulated: "
+                                     f"{len(to_b)} sets were (the two best predicted, their ties and the "
+                                     f"sets without a secondary source)"
+                                     + (f"; best predicted '{top['name']}' {top['predicted_score']:.4g}"
+                                        if top is not None else ""),
+                           "predicted_nrmse": entry["predicted_nrmse"], "simulated": [x[0]["name"] for x in to_b]})
     scored = [r for r in results if "score" in r]
     # a shaft form competes with the rigid forms holding the same sources, simulated or predicted
     same = {}
