@@ -118,6 +118,19 @@ def _shaft_clears(entries, drive_forms):
     return [r for r in entries if r.get("form") not in drive_forms or sc(r) <= (1.0 - SHAFT_MARGIN) * rigid]
 
 
+def drive_forms_cleared(entries, drive_forms):
+    """``entries`` without the drive forms that do not clear :func:`_shaft_clears` against
+    the rigid forms holding as many sources, whichever member of a tie stands for a family:
+    a swap names another member of the same family, so it holds the same sources
+    (independent seed-10 c17: a leader shaft with roller9 in idler_u1's place, 0.526,
+    cleared its swap's best rigid set, 0.592, but not idler_u1's own, 0.572, and was
+    claimed in place of a phantom roller19; the truth has neither)."""
+    same = {}
+    for r in entries:
+        same.setdefault(tuple(sorted(r.get("without") or ())), []).append(r)
+    return [r for grp in same.values() for r in _shaft_clears(grp, drive_forms)]
+
+
 def shaft_forms(d, effs):
     """Compliant drive shafts on the driven rollers (not the rolls: those sit at the
     line's ends), as model forms: [(name, description, sets, (element, f_t))]. A
@@ -747,12 +760,7 @@ def screen(d):
                                         if top is not None else ""),
                            "predicted_nrmse": entry["predicted_nrmse"], "simulated": [x[0]["name"] for x in to_b]})
     scored = [r for r in results if "score" in r]
-    # a shaft form competes with the rigid forms holding the same sources, simulated or predicted
-    same = {}
-    for r in results + [x[0] for x in not_b]:
-        sw = r.get("swap") or {}
-        same.setdefault(("without" in r, sw.get("replaced"), sw.get("by")), []).append(r)
-    cleared = [r for grp in same.values() for r in _shaft_clears(grp, drive_forms)]
+    cleared = drive_forms_cleared(results + [x[0] for x in not_b], drive_forms)
     pars_ok = [r for r in cleared if "without" in r]
     full_scored = [r for r in cleared if "without" not in r and "score" in r]
     best = min(full_scored, key=lambda r: r["score"])

@@ -425,6 +425,33 @@ def test_a_shaft_form_must_fit_ten_percent_better_than_the_rigid_forms_with_its_
     assert structure._shaft_clears(grp[2:], shafts) == grp[2:]
 
 
+def test_a_shaft_form_with_another_member_of_a_tie_competes_with_every_members_rigid_sets():
+    """Independent seed-10 c17 (eccentric idler_u1 and guide_in, no shaft): without the
+    phantom roller19, a leader shaft with roller9 (idler_u1's tie) in idler_u1's place
+    scored 0.526, 11 % under that swap's best rigid set (0.592) but only 8 % under
+    idler_u1's own (0.572). A swap names another member of the same family: the sets
+    hold as many sources, and the shaft does not clear. The full sets (with roller19)
+    are a group of their own."""
+    from webline.diagnosis import structure
+
+    shaft = "shaft on sw_leader at 6.21 Hz"
+    shafts = {shaft: ("sw_leader", "compliance", 6.21)}
+    w = ["roller19"]
+    swap = {"replaced": "idler_u1", "by": "roller9"}
+    entries = [{"form": "feedforward reference + web damping 2 ms", "score": 0.491},
+               {"form": shaft, "score": 0.60},
+               {"form": "feedforward reference + web damping 2 ms", "score": 0.572, "without": w},
+               {"form": "feedforward reference + web damping 2 ms", "score": 0.592, "without": w, "swap": swap},
+               {"form": shaft, "score": 0.526, "without": w, "swap": swap}]
+    assert structure._shaft_clears(entries[3:], shafts) == entries[3:]          # the swap's group alone
+    kept = structure.drive_forms_cleared(entries, shafts)
+    assert entries[4] not in kept and entries[1] not in kept
+    assert [e for e in entries if e["form"] != shaft] == kept
+    # 10 % under every rigid set with as many sources: kept
+    entries[4]["score"] = 0.50
+    assert entries[4] in structure.drive_forms_cleared(entries, shafts)
+
+
 def _weak_roll_beside_strong_idler(rescale=True):
     fs, n = 100.0, 6000
     t = np.arange(n) / fs
