@@ -171,8 +171,9 @@ def test_the_misfit_floor_counts_the_fine_views_degrees_of_freedom():
 def test_the_noise_bound_of_a_bands_misfit_is_two_standard_errors_of_its_null_spread():
     """Residuals that are noise alone: each Welch bin a chi-square over its mean, the fine
     view's 3-bin mean, two load cells. The misfit over a band exceeds
-    misfit_bound x misfit_floor about as often as a normal variable exceeds two standard
-    deviations (2.3 %); 5000 draws put the share within +-0.7 % of it (3 sigma)."""
+    misfit_bound x misfit_floor about as often as a normal variable exceeds NOISE_SE = 1.5
+    standard deviations (6.7 %; the squared logs' right tail is shorter: 5.7 % in 20000
+    draws); 5000 draws put the share within +-1 % of it (3 sigma)."""
     from types import SimpleNamespace
     c = SimpleNamespace(mask=np.ones(15000, bool), fs=250.0, sensors=["lc9.T", "lc19.T"])
     rng = np.random.default_rng(3)
@@ -183,7 +184,7 @@ def test_the_noise_bound_of_a_bands_misfit_is_two_standard_errors_of_its_null_sp
         fine = (x[:, :, :-2] + x[:, :, 1:-1] + x[:, :, 2:]) / 3.0
         m = np.mean(np.log(fine) ** 2, axis=(1, 2))
         above = np.mean(m > compliance.misfit_bound(c, band) * compliance.misfit_floor(c))
-        assert 0.01 < above < 0.045, (band, above)
+        assert 0.035 < above < 0.085, (band, above)
 
 
 def test_a_shafts_nrmse_rise_counts_only_when_it_holds_block_by_block():
@@ -303,6 +304,6 @@ def test_no_shaft_where_the_rigid_line_in_its_best_form_fits_the_band_within_noi
     gated = [r for r in recs if r["rigid"].get("x_floor") is not None
              and r["rigid"]["x_floor"] <= r["rigid"]["noise_bound_x_floor"]]
     assert gated and all(r["claimed"] is None and "within noise" in r["why"] for r in gated)
-    # missed as modelled beyond FLOOR_X; in the best form within two standard errors of the floor
+    # missed as modelled beyond FLOOR_X; in the best form within NOISE_SE standard errors of the floor
     assert all(r["hump"]["misfit_ratio"] > compliance.FLOOR_X for r in gated)
     assert all(1.0 < r["rigid"]["noise_bound_x_floor"] < compliance.FLOOR_X for r in gated)

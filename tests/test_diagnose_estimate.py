@@ -116,10 +116,20 @@ def test_a_tie_is_the_candidates_the_sensors_cannot_tell_apart_not_every_candida
     assert [r["cand"].element for r in est.tied(ranked)] == ["idler_u1", "roller9"]
     d = SimpleNamespace(opt=SimpleNamespace(significance=-6.0))
     conf, why = report._confidence(d, ranked)
-    # 1/2 raised by the 1.2 % less residual the first leaves: (1 - 0.5125/0.5186) / 0.5 * 1/2
+    # 1/2 raised by the 1.2 % less residual the first leaves: (1 - 0.5125/0.5186) / 0.5 * 1/2,
+    # times what the pattern's exclusion of the other zone leaves: 1 - 0.0781/0.9180
     gain = 1.0 - 0.5125 / 0.5186
-    assert conf == pytest.approx(0.5 + 0.5 * gain / 0.5, rel=1e-9)
+    assert conf == pytest.approx((0.5 + 0.5 * gain / 0.5) * (1.0 - 0.0781 / 0.9180), rel=1e-9)
     assert "(idler_u1, roller9)" in why and "idler_r1, roller19 excluded by the pattern" in why
+    # seed-15 c17: the other zone excluded at 0.545 against 0.439, the truth among it. Inside
+    # the tie roller19 leaves 26 % less than idler_r1 (0.76 before); the exclusion is a
+    # 19 % gap, under the 1/4 of four candidates, so the tie keeps a quarter
+    ranked3 = [cand("roller19", 0.439, 0.74), cand("idler_r1", 0.440, 1.0),
+               cand("idler_u1", 0.545, 1.1), cand("roller9", 0.546, 1.1)]
+    assert [r["cand"].element for r in est.tied(ranked3)] == ["roller19", "idler_r1"]
+    conf3, why3 = report._confidence(d, ranked3)
+    assert conf3 == pytest.approx((0.5 + 0.5 * 0.26 / 0.5) * 0.25, rel=1e-9)
+    assert "leaves 25 % of the confidence" in why3
     # one candidate clearly ahead: no tie, the misfit gap sets the uniqueness
     ranked2 = [cand("idler_u1", 0.078, None), cand("idler_r1", 0.918, None)]
     assert len(est.tied(ranked2)) == 1
