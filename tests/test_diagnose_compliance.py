@@ -168,7 +168,7 @@ def test_the_misfit_floor_counts_the_fine_views_degrees_of_freedom():
     assert np.mean(np.log(x) ** 2) == pytest.approx(compliance.misfit_floor(c), rel=0.05)
 
 
-def test_the_noise_bound_of_a_bands_misfit_is_two_standard_errors_of_its_null_spread():
+def test_the_noise_bound_of_a_bands_misfit_is_noise_se_standard_errors_of_its_null_spread():
     """Residuals that are noise alone: each Welch bin a chi-square over its mean, the fine
     view's 3-bin mean, two load cells. The misfit over a band exceeds
     misfit_bound x misfit_floor about as often as a normal variable exceeds NOISE_SE = 1.5
