@@ -785,7 +785,7 @@ def screen(d):
                                "local_before": e_cur, "local_after": e_best})
     if sec_fes:
         chosen = _parsimony(d, chosen, [r for r in scored if "without" in r and any(r is x for x in pars_ok)],
-                            effs, sec, e_cur, cur_nr, drive_forms)
+                            effs, sec, e_cur, cur_nr)
     if chosen.get("swap"):
         _take_swap(d, chosen)
     for r in scored:
@@ -1065,22 +1065,7 @@ def own_lines(own):
             "orders": [j for g, j in sorted(parts, reverse=True) if g > 0]}
 
 
-def drive_swap_refused(r, full, drive_forms):
-    """Why a set without a secondary source, in a drive form, may not replace the full set
-    (None if it may). A drive form in a source's place holds as many effects as the full
-    set: it is a swap, not a simpler account, and may fit worse than the full set by no
-    more than a drive form must fit better to be taken (:data:`SHAFT_MARGIN`). Independent
-    seed-7 c12: two eccentric idlers, a leader shaft in idler_u1's place scored 0.383
-    against 0.275 with both and was claimed; seed-4 c05's true leader shaft, in roller19's
-    place, scores 0.349 against 0.341."""
-    if r.get("form") not in drive_forms or r["score"] <= (1.0 + SHAFT_MARGIN) * full["score"]:
-        return None
-    return (f"'{r['form']}' takes a source's place with a drive effect, as many effects as the full set, "
-            f"and fits worse (sum of NRMSE^2 {r['score']:.4g} against {full['score']:.4g}; "
-            f"{100 * SHAFT_MARGIN:.0f} % allowed)")
-
-
-def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms=()):
+def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     """One source and a form against two sources at one frequency.
 
     The set without the secondary sources, re-estimated in another form, wins
@@ -1105,7 +1090,6 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms=()):
     # of benchmark c01/c07 too, on re-estimation differences of the primary
     for r in sorted(cands, key=lambda r: r["score"]):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
-        why = why or drive_swap_refused(r, full, drive_forms)
         own = [o for o in own_orders(d, full, r, sec) if o["z"] > ORDER_Z]
         lines = own_lines(own)
         if why is None and lines is not None and lines["share"] >= OWN_LINES_KEEP:
