@@ -515,7 +515,8 @@ def screen(d):
         rigid = _rigid_alternatives(d, noise, hump, c, cache)
         rec["rigid"]["forms"] = rigid
         rb = min(rigid, key=lambda r: r["misfit"]) if rigid else None
-        if rb is not None and rb["misfit"] < base[0]:
+        in_form = rb is not None and rb["misfit"] < base[0]
+        if in_form:
             log.info("  the rigid line in form '%s' fits the spectrum better than as modelled (%.3g, %.3g)",
                      rb["form"], rb["misfit"], base[0])
             base = (rb["misfit"], rb["explained"], {})
@@ -535,7 +536,7 @@ def screen(d):
                           f"errors: {bound:.2g} x)")
             log.info("  no shaft claimed: %s", rec["why"])
             continue
-        if rb is not None and rec["rigid"]["form"] == rb["form"]:
+        if in_form:
             doc_f = cache[(rb["form"], c.name)][0]
             sets = next((dict(x) for name, _, x in structure.alternatives(d) if name == rb["form"]), {})
             tried_f, pts_f = _scan(d, noise, hump, c, specs, doc0=doc_f, form=rb["form"], sets=sets)

@@ -282,14 +282,21 @@ def _cand_entry(d, r):
     return out
 
 
+def _pattern_gap(m1, m2, n):
+    """Uniqueness from the pattern misfits of the best (``m1``) and the next (``m2``) of
+    ``n`` candidates: their relative gap, at least 1/n."""
+    return max(float(np.clip((m2 - m1) / max(m2, 1e-9), 0.0, 1.0)), 1.0 / n)
+
+
 def _confidence(d, ranked):
     """Confidence in [0, 1]: significance x uniqueness among the candidates.
 
     Significance saturates 6 decades beyond the threshold. Uniqueness is 1 for
     a single candidate; among candidates whose patterns the sensors cannot tell
     apart (:func:`diagnosis.estimate.tied`) it is 1/n, raised by how much less
-    residual the first one leaves when each is simulated with its estimate;
-    otherwise the relative gap between the best and the second pattern misfit."""
+    residual the first one leaves when each is simulated with its estimate, times
+    the pattern gap to the best candidate outside the tie; otherwise the relative
+    gap between the best and the second pattern misfit (:func:`_pattern_gap`)."""
     b = ranked[0]
     thr = d.opt.significance
     sig = float(np.clip((thr - b["score"]["logp"]) / 6.0, 0.0, 1.0))
@@ -317,15 +324,14 @@ def _confidence(d, ranked):
             # measure as between two single candidates (independent seed-15 c17: roller19 at
             # 0.76 with idler_u1, the truth, excluded at 0.545 against 0.439)
             m_out = min(r["misfit"] for r in out)
-            u_out = max(float(np.clip((m_out - b["misfit"]) / max(m_out, 1e-9), 0.0, 1.0)), 1.0 / len(ranked))
+            u_out = _pattern_gap(b["misfit"], m_out, len(ranked))
             uniq *= u_out
             why += (f"; {', '.join(r['cand'].element for r in out)} excluded by the pattern "
                     f"(misfit {m_out:.3f} vs {b['misfit']:.3f}, which leaves {100 * u_out:.0f} % of the "
                     f"confidence in the tie)")
     else:
         m1, m2 = ranked[0]["misfit"], ranked[1]["misfit"]
-        uniq = float(np.clip((m2 - m1) / max(m2, 1e-9), 0.0, 1.0))
-        uniq = max(uniq, 1.0 / len(ranked))
+        uniq = _pattern_gap(m1, m2, len(ranked))
         why = (f"{len(ranked)} elements consistent in frequency; ranked by the pattern across "
                f"sensors (misfit {m1:.3f} vs {m2:.3f})")
     return float(sig * uniq), why
