@@ -307,3 +307,52 @@ def test_no_shaft_where_the_rigid_line_in_its_best_form_fits_the_band_within_noi
     # missed as modelled beyond FLOOR_X; in the best form within NOISE_SE standard errors of the floor
     assert all(r["hump"]["misfit_ratio"] > compliance.FLOOR_X for r in gated)
     assert all(1.0 < r["rigid"]["noise_bound_x_floor"] < compliance.FLOOR_X for r in gated)
+
+
+def test_no_shaft_for_a_hump_the_rigid_line_makes_with_a_current_lag_in_its_drives(tmp_path):
+    """The benchmark's seed-16 c03: noise only (the truth's speed loops feed forward the set
+    point, lags of 2-3.7 ms in the current loops, second-order load cells). The line as
+    modelled misses lc19's 2-8 Hz band by 4.2 x what noise leaves and its best lag-free form
+    by 2.4 x; a rewind shaft at 7.76 Hz, at the band's edge, fitted it at 1.3 x and was
+    claimed. With a current lag among the rigid forms the best form is a lagged one (2.3 x),
+    and in it the best shaft fits the band with the other drives' ripple (its own drive
+    carries 46 % of it, a shaft needs 50 %). The margin is thin: this case pins it."""
+    doc = B.derive_line()
+    facts = B.line_facts(B.write_yaml(tmp_path / "l.yaml", doc))
+    case = next(c for c in BI.draw_cases(3, seed=16, layout_doc=doc, facts=facts) if c.id == "c03")
+    assert case.category == "noise_only" and not case.effects
+    truth = BI.make_case(case, tmp_path / "case", doc)
+    blind = tmp_path / "case" / "blind"
+    rep = diagnose(blind / "line.yaml", [blind / f"{r['name']}.yaml" for r in truth["runs"] if not r["holdout"]],
+                   [blind / f"{r['name']}.yaml" for r in truth["runs"] if r["holdout"]],
+                   tmp_path / "diag", Options(confirm=False, jobs=1))
+    assert not rep["effects"]
+    recs = [r for r in rep.get("compliance") or [] if r["hump"]["kind"] == "spectral misfit"]
+    assert recs and all(r["claimed"] is None for r in recs)
+    # beyond noise's bound in the best rigid form, which carries the lag
+    assert any(r["rigid"]["x_floor"] > r["rigid"]["noise_bound_x_floor"]
+               and r["rigid"]["form"].endswith(f"current lag {compliance.CURRENT_LAG}") for r in recs)
+
+
+def test_the_rigid_forms_a_shaft_must_beat_include_a_current_lag_in_every_drive(monkeypatch):
+    """A current-loop lag takes phase from the speed loop near its crossover: a rigid form,
+    alone and with each feed-forward form (not with web damping: the forms' count)."""
+    from webline.diagnosis import structure
+    ff = {"drives.speed_loops.unwind.feedforward": "reference", "drives.speed_loops.rewind.feedforward": "reference"}
+    lc = {"sensors.lc9.filter_order": 2}
+    alts = [("feedforward reference", "", ff), ("load-cell filter order 2", "", lc),
+            ("web damping 2 ms", "", {"web.damping": "2 ms"}),
+            ("feedforward reference + load-cell filter order 2", "", {**ff, **lc}),
+            ("feedforward reference + web damping 2 ms", "", {**ff, "web.damping": "2 ms"})]
+    monkeypatch.setattr(structure, "alternatives", lambda d: list(alts))
+    forms = {n: sets for n, _, sets in compliance.rigid_forms(None)}
+    lag = {"drives.speed_loops.unwind.current_lag": compliance.CURRENT_LAG,
+           "drives.speed_loops.rewind.current_lag": compliance.CURRENT_LAG}
+    assert forms[f"current lag {compliance.CURRENT_LAG}"] == lag
+    assert forms[f"feedforward reference + current lag {compliance.CURRENT_LAG}"] == {**ff, **lag}
+    assert forms[f"feedforward reference + load-cell filter order 2 + current lag {compliance.CURRENT_LAG}"] \
+        == {**ff, **lc, **lag}
+    assert len(forms) == len(alts) + 3   # the lag alone, with each feed-forward form but the damped one
+    # a line without speed loops has no lag to add
+    monkeypatch.setattr(structure, "alternatives", lambda d: [("web damping 2 ms", "", {"web.damping": "2 ms"})])
+    assert [n for n, _, _ in compliance.rigid_forms(None)] == ["web damping 2 ms"]
