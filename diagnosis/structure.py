@@ -748,17 +748,6 @@ def screen(d):
         if x is not None:
             stage_b(*x)
             to_b.append(x)
-    # a drive form without a secondary source is judged by the same drive effect with every
-    # source: simulate that full set when no full set of its element and kind was
-    for x in [x for x in to_b if "without" in x[0] and x[0]["form"] in drive_forms]:
-        key = drive_forms[x[0]["form"]][:2]
-        if sec_fes and not any(r.get("form") in drive_forms and drive_forms[r["form"]][:2] == key
-                               and "without" not in r and "score" in r for r in results):
-            y = next((y for y in stage_a if "without" not in y[0] and y[0]["form"] in drive_forms
-                      and drive_forms[y[0]["form"]][:2] == key and all(y is not z for z in to_b)), None)
-            if y is not None:
-                stage_b(*y)
-                to_b.append(y)
     not_b = [x for x in stage_a if all(x is not y for y in to_b)]
     top = min((x[0] for x in to_b if "predicted_score" in x[0]), key=lambda e: e["predicted_score"], default=None)
     for entry, alt0, X1s, Gs in not_b:
@@ -796,7 +785,7 @@ def screen(d):
                                "local_before": e_cur, "local_after": e_best})
     if sec_fes:
         chosen = _parsimony(d, chosen, [r for r in scored if "without" in r and any(r is x for x in pars_ok)],
-                            effs, sec, e_cur, cur_nr, drive_help(results, drive_forms))
+                            effs, sec, e_cur, cur_nr)
     if chosen.get("swap"):
         _take_swap(d, chosen)
     for r in scored:
@@ -969,7 +958,7 @@ def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
     sources explained there, (w^2 - p^2) / (w^2 - f^2), or - ``floor``: the NRMSE
     the sensor's noise allows - the secondary sources closing less than
     ``CLOSES`` of the gap between the one-source form and that floor,
-    (p^2 - f^2) / (p^2 - a^2), the form at most ``PARSIMONY`` above w there, where the form recovers at least ``RECOVER_MIN``
+    (p^2 - f^2) / (p^2 - a^2), where the form recovers at least ``RECOVER_MIN``
     of what they explained if that was ``SEC_SHARE`` of the sensor's NRMSE^2 or more. A source at another's frequency always buys some fit:
     two complex amplitudes per order fit two sensors' lines whatever the line's
     transfer; a real one takes the sensor most of the way to its noise, one that
@@ -994,15 +983,9 @@ def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
         # 'load-cell filter order 2'); a small one is a transfer error absorbed whatever the
         # forms recover (seed-3 c04 and c13: phantoms taking 0.04 and 0.01 of NRMSE^2,
         # recovered 40 % and -171 %; seed-0 c07: 0.008, 78 %)
-        # ... and only where the form is about as good as dropping them in the layout's form: a
-        # form (or a swap) that costs the sensor more than they explained there does not carry
-        # the line (independent seed-5 c17: roller19 in roller9's place, 'feedforward reference +
-        # load-cell filter order 2', lc9 0.455 with idler_r1, 0.464 without it, 0.593 in the form;
-        # the held-out ramp's lc9 went 1.00 -> 1.84)
         big = sec_part >= SEC_SHARE
         ok = (f > 0 and p <= (1.0 + PARSIMONY) * f) or (rec is not None and rec >= RECOVER) \
-            or (closes is not None and closes < CLOSES and p <= (1.0 + PARSIMONY) * w
-                and (not big or (rec is not None and rec >= RECOVER_MIN)))
+            or (closes is not None and closes < CLOSES and (not big or (rec is not None and rec >= RECOVER_MIN)))
         if not ok and why is None:
             why = (f"{s_}: NRMSE {f:.3g} with the secondary sources, {w:.3g} without them in the layout's "
                    f"form, {p:.3g} without them in the form '{form}' (recovers "
@@ -1082,45 +1065,7 @@ def own_lines(own):
             "orders": [j for g, j in sorted(parts, reverse=True) if g > 0]}
 
 
-def drive_help(results, drive_forms):
-    """{(element, kind): (best sum of NRMSE^2 of that drive effect with every source, best
-    of the rigid forms with every source)}, over the simulated full sets: does the drive
-    effect help the whole account, or only stand in for a source it replaced?"""
-    full = [r for r in results if "without" not in r and "score" in r]
-    rigid = min((r["score"] for r in full if r.get("form") not in drive_forms), default=math.inf)
-    out = {}
-    for r in full:
-        if r.get("form") in drive_forms:
-            key = tuple(drive_forms[r["form"]][:2])
-            out[key] = (min(r["score"], out.get(key, (math.inf,))[0]), rigid)
-    return {"forms": dict(drive_forms), "help": out}
-
-
-def drive_swap_refused(r, help_):
-    """Why a set without a secondary source in a drive form may not replace the full set
-    (None if it may). Such a set holds as many effects as the full set: the drive effect
-    takes the source's place. A real drive effect also helps the account that keeps every
-    source; one that only stands in for the source it replaced does not. Independent
-    cases, the drive effect with every source against the best rigid full set: real
-    seed-8 c24 leader dead zone 0.530 against 0.584, seed-4 c05 leader shaft 0.324 against
-    0.341; stand-ins seed-7 c12 leader shaft 0.293 against 0.275, seed-5 c17 0.554 against
-    0.552. (Held to the full set's fit within 10 % instead, seed-8 c24's true dead zone,
-    0.699 without roller19, was lost.)"""
-    forms = (help_ or {}).get("forms", {})
-    if r.get("form") not in forms:
-        return None
-    key = tuple(forms[r["form"]][:2])
-    with_all, rigid = help_["help"].get(key, (None, None))
-    if with_all is not None and with_all < rigid:
-        return None
-    el, kind = key
-    return (f"'{r['form']}' takes a source's place with a {kind} of {el}, and that {kind} does not "
-            f"help the account with every source (" + (
-                f"sum of NRMSE^2 {with_all:.4g} with it against {rigid:.4g} for the best rigid form"
-                if with_all is not None else "not simulated with every source") + ")")
-
-
-def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive=None):
+def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr):
     """One source and a form against two sources at one frequency.
 
     The set without the secondary sources, re-estimated in another form, wins
@@ -1145,7 +1090,6 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive=None):
     # of benchmark c01/c07 too, on re-estimation differences of the primary
     for r in sorted(cands, key=lambda r: r["score"]):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
-        why = why or drive_swap_refused(r, drive)
         own = [o for o in own_orders(d, full, r, sec) if o["z"] > ORDER_Z]
         lines = own_lines(own)
         if why is None and lines is not None and lines["share"] >= OWN_LINES_KEEP:
