@@ -261,9 +261,10 @@ def rigid_forms(d):
     shaft at 7.76 Hz was claimed)."""
     from webline.diagnosis import structure
     out = structure.alternatives(d)
-    loops = sorted(k.split(".")[2] for _, _, sets in out for k in sets
-                   if k.startswith("drives.speed_loops.") and k.endswith(".feedforward"))
-    lag = {f"drives.speed_loops.{x}.current_lag": CURRENT_LAG for x in sorted(set(loops))}
+    # the speed loops as the feed-forward forms name them
+    loops = sorted({k.split(".")[2] for _, _, sets in out for k in sets
+                    if k.startswith("drives.speed_loops.") and k.endswith(".feedforward")})
+    lag = {f"drives.speed_loops.{x}.current_lag": CURRENT_LAG for x in loops}
     if not lag:
         return out
     extra = [(f"current lag {CURRENT_LAG}", f"a {CURRENT_LAG} current-loop lag in every drive", dict(lag))]
@@ -276,7 +277,7 @@ def rigid_forms(d):
 
 def _rigid_alternatives(d, noise, hump, c, cache=None):
     """The spectral fit of the rigid line in each structural alternative
-    (:func:`diagnosis.structure.alternatives`): a line mode the model places wrong
+    (:func:`rigid_forms`): a line mode the model places wrong
     (another feed-forward, other gains) makes a hump too, and a shaft must fit
     better than every rigid form, not only the modelled one. ``cache`` keeps each
     form's simulation and ripple responses per run (they do not depend on the band)."""
