@@ -515,13 +515,22 @@ def _verdict(rep):
         f = e.get("fundamental_hz")
         parts.append(f"{e['kind']} of {c}" + (f" (f = {f:.3g} Hz)" if f else "")
                      + f", explains {100 * e['explained_share']:.0f} % of the "
-                     + (e.get("explains_what") or ("periodic residual" if e.get("harmonics") else "residual left")))
+                     + (e.get("explains_what") or ("periodic residual" if e.get("harmonics") else "residual left"))
+                     + _runner_up_note(e))
     g = []
     for s, v in rep["gap"].items():
         if v["nominal"] and v["refined"]:
             g.append(f"{s}: NRMSE {v['nominal']['nrmse']:.3g} -> {v['refined']['nrmse']:.3g}"
                      + (f" (noise allows {v['achievable']:.3g})" if v.get("achievable") is not None else ""))
     return "; ".join(parts) + ". " + "; ".join(g) + "." + extra
+
+
+def _runner_up_note(e):
+    """A shaft whose band another drive's shaft fits nearly as well says so in the verdict."""
+    r = e.get("runner_up")
+    if not r or r.get("settled"):
+        return ""
+    return f" ({r['element']}'s shaft fits it {100 * r['worse']:.0f} % worse: the drive is not settled)"
 
 
 def _clean(o):

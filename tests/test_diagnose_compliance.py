@@ -49,6 +49,33 @@ def test_label_says_which_hump_a_claimed_shaft_reproduces():
     assert out[0]["rigid_form"] == "feedforward reference"
 
 
+def test_a_claimed_shaft_names_the_next_drive_when_its_shaft_fits_the_band_nearly_as_well():
+    hump = {"kind": "spectral misfit", "run": "run1", "sensor": "lc9.T", "frequency_hz": 10.0,
+            "band_hz": [5.0, 20.0]}
+    rec = {"rigid": {"form": "web damping 2 ms"}}
+    spec = ("unwind", None, ("inertia", 0.1))
+
+    def shaft(el, misfit):
+        return {"element": el, "torsional_hz": 12.5, "zeta": 0.05, "misfit": misfit, "explained": 0.85,
+                "own_share": 0.7, "levels": {el: 0.005}, "spec": spec, "form": None, "sets": {}}
+    # seed-17 c21's numbers: the unwind's shaft 0.0264, the truth's leader 0.0383 (45 % worse)
+    tried = [shaft("unwind", 0.0264), shaft("sw_leader", 0.0383), shaft("rewind", 0.0842)]
+    eff = compliance._effect(hump, rec, tried, (0.041, 0.8, {}), {"accepted": True})
+    r = eff["runner_up"]
+    assert r["element"] == "sw_leader" and r["worse"] == pytest.approx(0.0383 / 0.0264 - 1.0, rel=1e-12)
+    assert not r["settled"] and "sw_leader's shaft fits the band 45 % worse" in eff["detail"]
+    assert "next element sw_leader 0.0383" in eff["confidence_basis"]
+    from webline.diagnosis import report
+    assert report._runner_up_note(eff) == " (sw_leader's shaft fits it 45 % worse: the drive is not settled)"
+    # twice the misfit or more: the band settles the drive, and the detail names only the claimed one
+    tried[1]["misfit"] = 2.0 * 0.0264
+    eff = compliance._effect(hump, rec, tried, (0.041, 0.8, {}), {"accepted": True})
+    assert eff["runner_up"]["settled"] and "sw_leader" not in eff["detail"]
+    assert report._runner_up_note(eff) == ""
+    # a single drive: nothing to name
+    assert compliance.runner_up(tried[:1]) is None
+
+
 def test_a_shaft_refused_within_noise_is_a_finding_once_per_drive_and_not_beyond_noise():
     def rec(element, f, t, rise=0.0019):
         return {"hump": {"kind": "spectral misfit", "run": "run1", "sensor": "lc9.T", "frequency_hz": f,
