@@ -63,10 +63,10 @@ NOISE_SE = 1.5      # a band the rigid line's best form fits within this many st
 #                     lost seed-6 c21's. The fit's free levels and floors put a right model's misfit below
 #                     the floor, so noise alone passes it less often than the 5.7 % of unfitted draws
 SETTLED = 1.0       # the next drive's shaft misfits the band by this much more (relative) and the claimed
-#                     drive is settled; below it the report names the other drive beside it. Claims of seeds
-#                     0-17 re-diagnosed: the next drive at 1.04-1.64 x for 6 true shafts, 1.12-1.47 x for 3 wrong
-#                     or phantom ones; at 1.93-4.9 x for 6 true shafts and one wrong (seed-15 c09, 2.0 x). It
-#                     separates nothing: it says how far one band's spectrum goes, not whether to claim
+#                     drive is settled; below it the report names the other drive beside it. In the shaft
+#                     claims of seeds 0-17 (benchmarks and single re-diagnoses) the next drive's misfit was
+#                     1.04-4.9 x the claimed one's for true shafts and 1.12-2.0 x for wrong-drive or phantom
+#                     ones: no rule, a statement of how far one band's spectrum goes
 MAX_HUMPS = 1       # humps tried, strongest first, before the missed bands (each costs a grid of simulations per drive)
 
 
@@ -504,7 +504,7 @@ def runner_up(tried):
     over the claimed one's, settled: whether that excess reaches :data:`SETTLED`}; None
     with a single drive. The ripple fit's free levels let another drive's shaft fit a
     band nearly as well (independent seed-17 c21: the truth's S-wrap leader shaft at
-    13.7 Hz, the unwind's claimed at 12.5 Hz with the leader's 31 % worse), and the
+    13.7 Hz, the unwind's claimed at 12.5 Hz with the leader's 47 % worse), and the
     report says so instead of naming one drive as if the spectrum had chosen it."""
     if len(tried) < 2 or not tried[0]["misfit"] > 0:
         return None
