@@ -528,8 +528,8 @@ def _verdict(rep):
 def _runner_up_note(e):
     """A shaft whose band another drive's shaft fits nearly as well says so in the verdict."""
     r = e.get("runner_up")
-    if not r or r.get("settled"):
-        return ""
+    if not r or r.get("settled") or any(c["element"] == r["element"] for c in e.get("candidates") or []):
+        return ""   # settled, or named already among the candidates
     return f" ({r['element']}'s shaft fits it {100 * r['worse']:.0f} % worse: the drive is not settled)"
 
 

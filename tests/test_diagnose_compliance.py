@@ -67,6 +67,8 @@ def test_a_claimed_shaft_names_the_next_drive_when_its_shaft_fits_the_band_nearl
     assert "next element sw_leader 0.0383" in eff["confidence_basis"]
     from webline.diagnosis import report
     assert report._runner_up_note(eff) == " (sw_leader's shaft fits it 45 % worse: the drive is not settled)"
+    # named already among the candidates (its shaft within SAME of the best): not twice
+    assert report._runner_up_note(dict(eff, candidates=[{"element": "unwind"}, {"element": "sw_leader"}])) == ""
     # twice the misfit or more: the band settles the drive, and the detail names only the claimed one
     tried[1]["misfit"] = 2.0 * 0.0264
     eff = compliance._effect(hump, rec, tried, (0.041, 0.8, {}), {"accepted": True})
