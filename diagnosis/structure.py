@@ -763,10 +763,22 @@ def screen(d):
     full_b = [r for r in results if "without" not in r and r.get("form") not in drive_forms and "score" in r]
     f_best = min(full_b, key=lambda r: r["score"]) if full_b else None
     if f_best is not None and f_best.get("set"):
+        # ... and the dead zones likewise, a shaft and a dead zone on one drive both pass the
+        # lines (seed-18 c17: the leader's shaft in 'feedforward none + web damping 2 ms' took
+        # the place of the truth's leader backlash, which the dead zone without the damping held)
+        combos, seen = [], set()
         for name, desc, sets, sh in sf:
-            if sh[1] != "compliance":
-                continue
+            if sh[1] == "backlash":   # its feed-forward form's keys give way to the best form's
+                name = f"dead zone on {sh[0]}"
+                desc = f"a {DEAD_ZONE_DEG:g} deg dead zone in {sh[0]}'s drive (stiff shaft)"
+                sets = {k: v for k, v in sets.items() if not k.endswith(".feedforward")}
+            if (name, sh[:2]) not in seen:
+                seen.add((name, sh[:2]))
+                combos.append((name, desc, sets, sh))
+        for name, desc, sets, sh in combos:
             combo = f"{f_best['form']} + {name}"
+            if combo in drive_forms:
+                continue
             drive_forms[combo] = sh
             n0 = len(stage_a)
             stage_a_one(combo, f"{f_best['description']}; {desc}", {**f_best["set"], **sets})
