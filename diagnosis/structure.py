@@ -164,10 +164,11 @@ def shaft_forms(d, effs):
     return out
 
 
-def dead_zone_forms(d, sims, forms):
+def dead_zone_forms(d, sims, forms, names=("feedforward none", "feedforward reference")):
     """Dead zones on the drives whose torque the current model (``sims``) swings through
     or near zero, as model forms beside each feed-forward form of ``forms`` (the
-    :func:`alternatives`): [(name, description, sets, (element, "backlash", width deg))].
+    :func:`alternatives`; those named ``names``, every one if None): [(name, description,
+    sets, (element, "backlash", width deg))].
     A dead zone changes how a periodic source's line passes the drive, and it does so
     in the form that passes the line as the line does: independent seed-10 c24's leader
     backlash (1.2 deg) beside an eccentric idler, simulated with the truth's run-out in
@@ -177,7 +178,7 @@ def dead_zone_forms(d, sims, forms):
     the swing crosses the zone, 0.6-2.5 deg fitted alike (0.734-0.751 on lc9)."""
     from webline.diagnosis import backlash, others
     taken = others.non_ideal_drives(d)
-    ff = [(name, sets) for name, _, sets in forms if name in ("feedforward none", "feedforward reference")]
+    ff = [(name, sets) for name, _, sets in forms if names is None or name in names]
     out = []
     for spec in others.drive_candidates(d):
         if spec[0] in taken or not others.torque_reverses(d, spec[0], sims=sims)[0]:
@@ -742,46 +743,40 @@ def screen(d):
 
     for x in to_b:
         stage_b(*x)
-    # the set without the secondary sources in the form the full set fits best, simulated
-    # whatever its prediction: does that form need them? (independent seed-10 c19: the full set
-    # fitted 0.16 in 'feedforward none + web damping 2 ms', every form predicted alike, and the
-    # two forms simulated without the phantom idler_u1 were the single feed-forward ones)
+    # the full set's best rigid form simulated (the layout's own or an alternative)
     full_b = [r for r in results if "without" not in r and r.get("form") not in drive_forms]
-    if sec_fes and full_b:
-        f_best = min(full_b, key=lambda r: r["score"]).get("form")
-        x = next((x for x in pars_a if x[0].get("form") == f_best and "swap" not in x[0]
+    f_best = min(full_b, key=lambda r: r["score"]) if full_b else None
+    # the set without the secondary sources in that form, simulated whatever its prediction:
+    # does that form need them? (independent seed-10 c19: the full set fitted 0.16 in
+    # 'feedforward none + web damping 2 ms', every form predicted alike, and the two forms
+    # simulated without the phantom idler_u1 were the single feed-forward ones)
+    if sec_fes and f_best is not None:
+        x = next((x for x in pars_a if x[0].get("form") == f_best.get("form") and "swap" not in x[0]
                   and all(x is not y for y in to_b)), None)
         if x is not None:
             stage_b(*x)
             to_b.append(x)
-    # the shaft forms in the rigid form that fits best, each simulated: a shaft passes the lines
-    # between the zones in the form the line has, and the linear prediction ranks such
-    # combinations no better than the shaft alone (independent seed-18 c05: the leader's shaft at
-    # 7.6 Hz in a line that feeds the set point forward, with 2.4 ms of web damping; the form
-    # 'feedforward reference + web damping 2 ms' fitted 0.456 simulated, 0.867 predicted, and
-    # the shaft forms in it were predicted 0.83-0.85, never simulated)
-    full_b = [r for r in results if "without" not in r and r.get("form") not in drive_forms and "score" in r]
-    f_best = min(full_b, key=lambda r: r["score"]) if full_b else None
+    # the drive forms in that form too, each simulated: a shaft passes the lines between the
+    # zones in the form the line has, and the linear prediction ranks such combinations no
+    # better than the shaft alone (independent seed-18 c05: the leader's shaft at 7.6 Hz in a
+    # line that feeds the set point forward, with 2.4 ms of web damping; the form 'feedforward
+    # reference + web damping 2 ms' fitted 0.456 simulated, 0.867 predicted, and the shaft forms
+    # in it were predicted 0.83-0.85, never simulated). The dead zones likewise: a shaft and a
+    # dead zone on one drive both pass the lines (seed-18 c17: the leader's shaft in
+    # 'feedforward none + web damping 2 ms' took the place of the truth's leader backlash,
+    # which the dead zone without the damping held)
     if f_best is not None and f_best.get("set"):
-        # ... and the dead zones likewise, a shaft and a dead zone on one drive both pass the
-        # lines (seed-18 c17: the leader's shaft in 'feedforward none + web damping 2 ms' took
-        # the place of the truth's leader backlash, which the dead zone without the damping held)
-        combos, seen = [], set()
-        for name, desc, sets, sh in sf:
-            if sh[1] == "backlash":   # its feed-forward form's keys give way to the best form's
-                name = f"dead zone on {sh[0]}"
-                desc = f"a {DEAD_ZONE_DEG:g} deg dead zone in {sh[0]}'s drive (stiff shaft)"
-                sets = {k: v for k, v in sets.items() if not k.endswith(".feedforward")}
-            if (name, sh[:2]) not in seen:
-                seen.add((name, sh[:2]))
-                combos.append((name, desc, sets, sh))
+        combos = [(f"{f_best['form']} + {name}", f"{f_best['description']}; {desc}", {**f_best["set"], **sets}, sh)
+                  for name, desc, sets, sh in sf if sh[1] == "compliance"]
+        if any(sh[1] == "backlash" for *_, sh in sf):
+            combos += dead_zone_forms(d, cur_sims, [(f_best["form"], f_best["description"], f_best["set"])],
+                                      names=None)
         for name, desc, sets, sh in combos:
-            combo = f"{f_best['form']} + {name}"
-            if combo in drive_forms:
+            if name in drive_forms:   # a feed-forward form's dead zone, screened already
                 continue
-            drive_forms[combo] = sh
+            drive_forms[name] = sh
             n0 = len(stage_a)
-            stage_a_one(combo, f"{f_best['description']}; {desc}", {**f_best["set"], **sets})
+            stage_a_one(name, desc, sets)
             if len(stage_a) > n0:
                 stage_b(*stage_a[-1])
                 to_b.append(stage_a[-1])
