@@ -409,7 +409,10 @@ class Diagnosis:
                 for j, zj in zip(orders, z):
                     out["z_order"][j] += float(zj)
             out["signal"][s] = sig
-            out["E"][s] = float(np.sum(sig[m] ** 2))
+            # in N^2 s: runs at different sample rates count by their duration (independent seed-19
+            # c02: a 1000 Hz run at 100 ft/min, its lines near noise, outweighed the 250 Hz run at
+            # 200 ft/min four to one in the family's coherence, 0.74 for the true out-of-round unwind)
+            out["E"][s] = float(np.sum(sig[m] ** 2)) / c.fs
         out["coherence"] = self._coherence(c, key, resid, th, orders, out, beside)
         return out
 
@@ -512,9 +515,9 @@ class Diagnosis:
                     else:
                         c.data_scale[k.key] = self._data_speed_scale(c, k, c.nominal)
         resid = {c.name: {s: c.periodic[s].copy() for s in c.sensors} for c in fit}
-        total = sum(float(np.sum(c.periodic[s][c.mask] ** 2)) for c in fit for s in c.sensors)
+        total = sum(float(np.sum(c.periodic[s][c.mask] ** 2)) / c.fs for c in fit for s in c.sensors)
         self.total_periodic = total
-        self.total_resid = sum(float(np.sum(c.resid[s][c.mask] ** 2)) for c in fit for s in c.sensors)
+        self.total_resid = sum(float(np.sum(c.resid[s][c.mask] ** 2)) / c.fs for c in fit for s in c.sensors)
         remaining = list(self.cands)
         self.screen_log = []
         n_tests = max(1, len(self.cands))
@@ -523,7 +526,7 @@ class Diagnosis:
             scores = []
             # what the families already taken left: a weak source beside a strong one is
             # judged on the residual it competes for, not on the strong source's lines
-            left = sum(float(np.sum(resid[c.name][s][c.mask] ** 2)) for c in fit for s in c.sensors)
+            left = sum(float(np.sum(resid[c.name][s][c.mask] ** 2)) / c.fs for c in fit for s in c.sensors)
             # the taken families' angles and orders, the same for every candidate of this step
             beside = {}
             for c in fit:
@@ -977,7 +980,7 @@ class Diagnosis:
                 r["verify"] = math.inf
                 continue
             r["verify"] = r.get("verify", 0.0) + sum(
-                float(np.sum((c.meas[s] - sim.columns[s])[c.mask] ** 2)) for s in c.sensors)
+                float(np.sum((c.meas[s] - sim.columns[s])[c.mask] ** 2)) / c.fs for s in c.sensors)
         tied.sort(key=lambda r: r.get("verify", math.inf))
         rest = [r for r in ranked if all(r is not x for x in tied)]
         ranked[:] = tied + rest
