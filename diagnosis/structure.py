@@ -52,6 +52,10 @@ MAX_TIED = 4             # ... up to this many more
 MAX_SWAPS = 3            # tied members tried in a primary source's place, in the set without the secondary ones
 ORDER_Z = 9.0            # parsimony's record of the secondary sources' orders: those the data show (z)
 OWN_LINES_KEEP = 0.05    # ... a secondary source whose own lines left carry this share of a sensor's gap stays
+OWN_ORDER_LEFT = 0.4     # ... counting the orders the form leaves at least this share of (energy): a few per cent
+#                          of the primary's large lines are its re-estimate in the form (seed-0 c07: 2 and 9 %),
+#                          not the secondary's own (seed-19 c24: the real roller9's order 1 on lc9, 46 % left,
+#                          43 % of lc9's gap; the phantoms of seed-3 c04 left 38 and 39 %)
 NOT_IDENTIFIABLE = 2.0   # dominant-order amplitude range (max/min) beyond which it is not identifiable
 
 
@@ -1068,7 +1072,7 @@ def own_orders(d, full, r, sec):
 def own_lines(own):
     """The secondary source's own lines that the form leaves, as one number (the rule of
     :data:`OWN_LINES_KEEP`): per source, run and sensor, over the orders the set without it in the
-    form leaves mostly (at least ``ORDER_LEFT_SHARE`` of the line), the sum of
+    form leaves in large part (at least :data:`OWN_ORDER_LEFT` of the line), the sum of
     share_of_gap x (left_without - left_full); the largest as {element, run, sensor,
     orders, share}, or None. A form that passes the primary's line on may explain the
     whole record about as well yet leave a real second source's own lines; but at one
@@ -1083,9 +1087,9 @@ def own_lines(own):
     8.0 %; every rule before dropped it: the form recovered 91 % of what it explained)."""
     sums = {}
     for o in own:
-        # the orders the form leaves mostly: a few per cent of the primary's large lines (its
+        # the orders the form leaves in large part: a few per cent of the primary's large lines (its
         # re-estimate in the form) would outweigh a phantom's own (seed-0 c07: 2.4 % of lc9's gap)
-        if o.get("share_of_gap") is None or o["left_without"] is None or o["left_without"] < ORDER_LEFT_SHARE:
+        if o.get("share_of_gap") is None or o["left_without"] is None or o["left_without"] < OWN_ORDER_LEFT:
             continue
         k = (o["element"], o["run"], o["sensor"])
         gain = o["share_of_gap"] * (o["left_without"] - (o["left_full"] or 0.0))

@@ -242,7 +242,7 @@ def test_a_dead_zone_form_is_reported_as_a_backlash_of_its_width():
 def test_own_lines_on_measured_orders():
     """The secondary source's own orders, as parsimony records them (independent
     cases, measured), summed into the record ``own_lines``."""
-    from webline.diagnosis.structure import own_lines
+    from webline.diagnosis.structure import OWN_LINES_KEEP, own_lines
 
     def row(el, j, s, left_w, left_f, share, run="run1"):
         return {"element": el, "order": j, "run": run, "sensor": s, "z": 100.0,
@@ -263,6 +263,13 @@ def test_own_lines_on_measured_orders():
     got = own_lines([row("roller9", 1, "lc9.T", 0.020, 0.00, 0.889), row("roller9", 2, "lc9.T", 0.086, 0.00, 0.0793),
                      row("roller9", 6, "lc9.T", 0.537, 0.00, 0.0003)])
     assert got["orders"] == [6] and got["share"] == pytest.approx(0.0003 * 0.537)
+    # seed-19 c24 (roller9 real, 0.10 mm beside idler_r1's 0.53 mm at one frequency): 'feedforward none
+    # + web damping 2 ms' without it leaves 46 % of its order 1 on lc9, a line of 43 % of lc9's gap
+    real = [row("roller9", 1, "lc9.T", 0.457, 0.001, 0.430), row("roller9", 3, "lc9.T", 1.566, 0.004, 0.003),
+            row("roller9", 6, "lc9.T", 0.697, 0.014, 0.002), row("roller9", 1, "lc19.T", 0.006, 0.0, 0.853)]
+    got = own_lines(real)
+    assert (got["sensor"], got["orders"][0]) == ("lc9.T", 1)
+    assert got["share"] >= OWN_LINES_KEEP
     # summed per run and sensor; nothing recorded, nothing to sum
     split = [row("x", 4, "lc9.T", 1.0, 0.0, 0.01, run=r) for r in ("run1", "run2")]
     assert own_lines(split)["share"] == pytest.approx(0.01)
