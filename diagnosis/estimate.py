@@ -197,7 +197,7 @@ def fit_harmonics_joint(y, families):
     return coef[0::2] + 1j * coef[1::2]
 
 
-def coherence_debiased(Ys, v):
+def coherence_debiased(Ys, v, clip=(0.0, 1.0)):
     """Phase stability per order of phasors ``Ys`` (K segments x orders) fitted
     on consecutive segments, each carrying white noise of expected ``|Y|^2 = v``
     (per order; ``2 S / T_seg``, :func:`harmonic_z`).
@@ -208,14 +208,20 @@ def coherence_debiased(Ys, v):
     line looks half incoherent. Subtracting the noise's share from both sums
     gives 1 for a steady line at any SNR; noise alone and a transient that
     fills one segment stay low. Clipped to [0, 1]; an order whose segments
-    carry no more than their noise reads 0."""
+    carry no more than their noise reads 0.
+
+    ``clip``: the range each order's value is held to. Averaged over orders, a
+    window around both values the estimate scatters about (0 for noise, 1 for a
+    steady line), such as (-1, 2), keeps the average unbiased: clipped to
+    [0, 1], a weak steady line's scatter above 1 is cut and its average reads
+    low, and noise's below 0 is cut and it reads high."""
     Ys = np.asarray(Ys, complex)
     K = Ys.shape[0]
     v = np.broadcast_to(np.asarray(v, float), Ys.shape[1:])
     num = np.abs(Ys.sum(axis=0)) ** 2 - K * v
     den = K * (np.sum(np.abs(Ys) ** 2, axis=0) - K * v)
     out = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
-    return np.clip(out, 0.0, 1.0)
+    return np.clip(out, *clip)
 
 
 def gamma_log10_sf(z_sum, shape):

@@ -91,6 +91,9 @@ class Options:
             raise ValueError(f"Options.estimator must be 'time' or 'harmonic' (got {self.estimator!r})")
 
 
+COHERENCE_CLIP = (-1.0, 2.0)   # per order, around noise's 0 and a steady line's 1 (est.coherence_debiased)
+
+
 class DiagnoseError(ValueError):
     """Bad input to the diagnosis (layout, runs, data): exit code 2."""
 
@@ -479,7 +482,10 @@ class Diagnosis:
                                for g in segs])
                 w = np.abs(fit["Y"][s]) ** 2 * share
                 v = 2.0 * c.floors[s](np.asarray(orders) * f) / T_seg if s in c.floors else 0.0
-                coh = est.coherence_debiased(Ys, v)
+                # each order held to a window around both 0 and 1, the average clipped once (in
+                # which): clipping each order to [0, 1] reads a weak steady line low (independent
+                # seed-19 c16: the leader's 0.1 mm eccentricity, SNR 11, at 0.73-0.77)
+                coh = est.coherence_debiased(Ys, v, clip=COHERENCE_CLIP)
                 num += float(np.sum(w * coh))
                 den += float(np.sum(w))
         if den == 0.0:
@@ -541,7 +547,12 @@ class Diagnosis:
                         continue
                     fits[c.name] = ff
                     E += sum(ff["E"].values())
-                    coh += ff["coherence"] * sum(ff["E"].values())
+                    # runs weighed by what they know of the family (its summed z: line power over the
+                    # noise, times the duration), not by its energy: a run whose lines sit near the
+                    # noise reads its coherence with a large scatter (independent seed-19 c02: the
+                    # out-of-round unwind at 200 ft/min 0.99, at 100 ft/min 0.56 with the lines at
+                    # segment SNR 1-4)
+                    coh += ff["coherence"] * ff["z"]
                     z += ff["z"]
                     n += ff["n"]
                     for j, zj in ff["z_order"].items():
@@ -556,7 +567,7 @@ class Diagnosis:
                                "share_left": E / left if left > 0 else 0.0,
                                "logp": logp, "fits": fits, "z": z, "n": n, "z_order": zo,
                                "lowest_order": strong[0] if strong else 99,
-                               "coherence": coh / E if E > 0 else 0.0})
+                               "coherence": float(np.clip(coh / z, 0.0, 1.0)) if z > 0 else 0.0})
             scores.sort(key=lambda d: -d["E"])
             self.screen_log.append([{"element": d["cand"].element, "kind": d["cand"].kind,
                                      "share": d["share"], "share_left": d["share_left"], "log10_p": d["logp"],
