@@ -412,9 +412,8 @@ class Diagnosis:
                 for j, zj in zip(orders, z):
                     out["z_order"][j] += float(zj)
             out["signal"][s] = sig
-            # in N^2 s: runs at different sample rates count by their duration (independent seed-19
-            # c02: a 1000 Hz run at 100 ft/min, its lines near noise, outweighed the 250 Hz run at
-            # 200 ft/min four to one in the family's coherence, 0.74 for the true out-of-round unwind)
+            # in N^2 s: in the family's share and rank, runs at different sample rates count by their
+            # duration, not their samples (independent seed-19 c02: fit runs at 250 and 1000 Hz)
             out["E"][s] = float(np.sum(sig[m] ** 2)) / c.fs
         out["coherence"] = self._coherence(c, key, resid, th, orders, out, beside)
         return out
@@ -444,7 +443,10 @@ class Diagnosis:
         the fit window gives phasors Y_k; per order |sum Y_k|^2 / (K sum |Y_k|^2)
         is 1 for a steady harmonic (its amplitude may change, its phase not) and
         about 1/K for noise or a transient the family merely projects onto.
-        Averaged over orders and sensors with the fitted energies as weights.
+        Averaged over orders and sensors with the fitted energies as weights,
+        each order held to :data:`COHERENCE_CLIP` (the run's value may lie
+        outside [0, 1]; :meth:`which` averages the runs by the family's z and
+        clips once).
 
         Segments never straddle two steady windows of the fit: at another line
         speed an order sits elsewhere on the line's frequency response, and its
