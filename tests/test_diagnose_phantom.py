@@ -274,3 +274,29 @@ def test_own_lines_on_measured_orders():
     split = [row("x", 4, "lc9.T", 1.0, 0.0, 0.01, run=r) for r in ("run1", "run2")]
     assert own_lines(split)["share"] == pytest.approx(0.01)
     assert own_lines([]) is None and own_lines([row("x", 4, "lc9.T", 1.0, 0.0, None)]) is None
+
+
+def test_a_shaft_in_a_sources_place_is_held_to_the_full_sets_fit():
+    """structure.shaft_swap_refused, on the measured sums of NRMSE^2: a shaft form in a
+    secondary source's place claims a compliance, as many effects as the full set, so it
+    may fit worse than the full set by no more than SHAFT_MARGIN; a dead zone is left free."""
+    from webline.diagnosis.structure import SHAFT_MARGIN, shaft_swap_refused
+    forms = {"shaft on sw_leader at 2.37 Hz": ("sw_leader", "compliance", 2.37),
+             "feedforward reference + dead zone on sw_leader": ("sw_leader", "backlash", 1.0)}
+
+    def swap(form, score):
+        return {"form": form, "score": score, "without": ["idler_u1"]}
+    # seed-20 c17: the shaft tuned to roller19's fundamental in the real idler_u1's place, 1.19 x
+    why = shaft_swap_refused(swap("shaft on sw_leader at 2.37 Hz", 0.5632), {"score": 0.4729}, forms)
+    assert why and "0.5632" in why and "0.4729" in why
+    # seed-4 c05: the true shaft in a phantom roller19's place, 1.02 x: may replace the full set
+    assert shaft_swap_refused(swap("shaft on sw_leader at 2.37 Hz", 0.349), {"score": 0.341}, forms) is None
+    # the bound is the margin a shaft must beat the rigid forms by
+    edge = (1.0 + SHAFT_MARGIN) * 0.4729
+    assert shaft_swap_refused(swap("shaft on sw_leader at 2.37 Hz", edge), {"score": 0.4729}, forms) is None
+    assert shaft_swap_refused(swap("shaft on sw_leader at 2.37 Hz", 1.001 * edge), {"score": 0.4729}, forms)
+    # seed-8 c24: the true dead zone in a phantom's place at 0.699 against 0.584 stays free
+    assert shaft_swap_refused(swap("feedforward reference + dead zone on sw_leader", 0.699),
+                              {"score": 0.584}, forms) is None
+    # a rigid form is parsimony's own business
+    assert shaft_swap_refused(swap("feedforward none", 9.0), {"score": 0.1}, forms) is None
