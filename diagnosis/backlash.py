@@ -27,7 +27,6 @@ import copy
 import logging
 import math
 
-import numpy as np
 
 from webline.diagnosis import claims
 from webline.diagnosis import others
@@ -43,9 +42,9 @@ WIDTH_RTOL = 1e-6                       # widths whose residual energies agree t
 
 
 def _energy(d, sims):
-    """Residual energy over the fit runs' fit samples, all sensors."""
-    return sum(float(np.sum((c.meas[s] - sims[c.name].columns[s])[c.mask] ** 2))
-               for c in d.fit_ctx() for s in c.sensors)
+    """Residual energy over the fit runs' fit windows, all sensors, in N^2 s (a run counts
+    by its duration, not its sample rate)."""
+    return sum(c.energy(c.meas[s] - sims[c.name].columns[s]) for c in d.fit_ctx() for s in c.sensors)
 
 
 def screen(d):

@@ -282,8 +282,9 @@ def screen(d):
     rem = remaining(d)
     z_slow, z_all, peaks = significance(d, rem)
     d.other_log.append({"z_slow": z_slow, "z_remaining": z_all, "unexplained_peaks_hz": peaks[:10]})
-    rr = sum(float(np.sum(rem[c.name][s][_settle(c)] ** 2)) for c in d.fit_ctx() for s in c.sensors)
-    r0 = sum(float(np.sum(c.resid[s][_settle(c)] ** 2)) for c in d.fit_ctx() for s in c.sensors)
+    # in N^2 s: a run counts by its duration, not its sample rate
+    rr = sum(c.energy(rem[c.name][s], _settle(c)) for c in d.fit_ctx() for s in c.sensors)
+    r0 = sum(c.energy(c.resid[s], _settle(c)) for c in d.fit_ctx() for s in c.sensors)
     rem_share = rr / r0 if r0 > 0 else 0.0
     d.other_log[-1]["remaining_share"] = rem_share
     look_slow = z_slow >= MIN_Z
