@@ -1090,12 +1090,12 @@ def own_lines(own):
     idler_r1 (0.08 mm beside idler_u1's 0.8 mm at one frequency, orders 2, 4-6 on lc19,
     8.0 %; every rule before dropped it: the form recovered 91 % of what it explained).
     The numbers above are shares of the whole gap. Counted against its periodic part
-    (:func:`own_orders`, twenty-sixth session; each case re-diagnosed blind at the
-    rules of that session): real seed-20 c24 7.0 % (3.5 % of the whole gap, lc9's gap
-    mostly 1/f noise), seed-19 c24 25 % (20 %), seed-8 c05 7.2 % (5.8 %), seed-11 c12
-    2.3 % (2.1 %, still dropped); phantoms seed-3 c13 0.82 % (0.74 %), seed-2 c07
-    0.19 % (0.17 %), seed-9 c22 -0.17 %, seed-3 c04 0, seed-0 c07 no order left in
-    large part."""
+    (:func:`own_orders`, twenty-sixth session; each case re-diagnosed blind at c330278,
+    a probe recording both): real seed-20 c24 7.0 % (3.5 % of the whole gap, lc9's gap
+    mostly 1/f noise), seed-19 c24 25 % (20 %), seed-8 c05 7.2 % (5.8 %), seed-11 c05
+    8.4 % (8.0 %), seed-11 c12 2.3 % (2.1 %, still dropped); phantoms seed-3 c13 0.82 %
+    (0.74 %), seed-2 c07 0.19 % (0.17 %), seed-9 c22 -0.17 %, seed-3 c04 0, seed-0 c07
+    no order left in large part."""
     sums = {}
     for o in own:
         # the orders the form leaves in large part: a few per cent of the primary's large lines (its
