@@ -27,7 +27,6 @@ import copy
 import logging
 import math
 
-
 from webline.diagnosis import claims
 from webline.diagnosis import others
 from webline.diagnosis import regress

@@ -1052,11 +1052,12 @@ def own_orders(d, full, r, sec):
             if not d.orders_for(c, cand.key):
                 continue
             for s in c.sensors:
-                gap = c.meas[s] - c.nominal.columns[s]
-                # the gap's periodic part (above fc): its slow part, drift and 1/f noise, is what no
-                # source at a rotating frequency explains (independent seed-20 c24: the real
-                # idler_u1's own lines on lc9 carry 3.5 % of the whole gap, 7.0 % of its periodic part)
-                e_gap = float(np.mean(est.split_slow_periodic(gap, c.fs, c.fc)[1][c.mask] ** 2))
+                gap = c.resid[s]   # measured minus nominal
+                # the gap's periodic part (above fc, split once per run): its slow part, drift and
+                # 1/f noise, is what no source at a rotating frequency explains (independent seed-20
+                # c24: the real idler_u1's own lines on lc9 carry 3.5 % of the whole gap, 7.0 % of
+                # its periodic part)
+                e_gap = float(np.mean(c.periodic[s][c.mask] ** 2))
                 orders, Yd = _harmonics(d, c, cand, gap)
                 _, Yw = _harmonics(d, c, cand, c.meas[s] - r["sims"][c.name].columns[s])
                 _, Yf = _harmonics(d, c, cand, c.meas[s] - full["sims"][c.name].columns[s])
@@ -1133,7 +1134,7 @@ def shaft_swap_refused(r, full, drive_forms):
             f"{100 * SHAFT_MARGIN:.0f} % allowed)")
 
 
-def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms=None):
+def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms):
     """One source and a form against two sources at one frequency.
 
     The set without the secondary sources, re-estimated in another form, wins
@@ -1158,7 +1159,7 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms=None):
     # of benchmark c01/c07 too, on re-estimation differences of the primary
     for r in sorted(cands, key=lambda r: r["score"]):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
-        why = why or shaft_swap_refused(r, full, drive_forms or {})
+        why = why or shaft_swap_refused(r, full, drive_forms)
         own = [o for o in own_orders(d, full, r, sec) if o["z"] > ORDER_Z]
         lines = own_lines(own)
         if why is None and lines is not None and lines["share"] >= OWN_LINES_KEEP:

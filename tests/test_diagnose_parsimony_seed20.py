@@ -26,9 +26,7 @@ import pytest
 from records import independent_cases
 
 SEED = 20
-UNWIND_ZONE = ("idler_u1", "roller9")   # one tie: equal radii, one zone
-
-
+UNWIND_ZONE = ("idler_u1", "roller9")   # one tie each: equal radii, one zone
 REWIND_ZONE = ("idler_r1", "roller19")
 
 
