@@ -47,3 +47,9 @@ def independent_cases(root, seed, ids, timeout=1200):
         assert res["report"] is not None, res.get("stderr") or res.get("generation_error")
         out[cid] = res
     return out
+
+
+def assert_no_sensor_worse(rep):
+    """Every load cell's refined NRMSE within the claim check's allowance (2 %) of the nominal one."""
+    for s, g in rep["gap"].items():
+        assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], (s, g["refined"], g["nominal"])
