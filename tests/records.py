@@ -49,7 +49,8 @@ def independent_cases(root, seed, ids, timeout=1200):
     return out
 
 
-def assert_no_sensor_worse(rep):
-    """Every load cell's refined NRMSE within the claim check's allowance (2 %) of the nominal one."""
-    for s, g in rep["gap"].items():
+def assert_no_sensor_worse(gap):
+    """Every load cell's refined NRMSE within the claim check's allowance (2 %) of the nominal one;
+    ``gap`` is a report's ``gap`` (or ``holdout.out_of_sample``) mapping."""
+    for s, g in gap.items():
         assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], (s, g["refined"], g["nominal"])

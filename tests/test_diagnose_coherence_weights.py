@@ -38,11 +38,11 @@ def test_the_out_of_round_unwind_is_found_and_nothing_else(cases):
     rep = cases["c02"]["report"]
     found = [(e["element"], e["kind"]) for e in rep["effects"]]
     assert found == [("unwind", "out_of_round")], rep["verdict"]
-    assert_no_sensor_worse(rep)
+    assert_no_sensor_worse(rep["gap"])
 
 
 def test_the_weak_leader_eccentricity_is_found_and_nothing_else(cases):
     rep = cases["c16"]["report"]
     found = [(e["element"], e["kind"]) for e in rep["effects"]]
     assert found == [("sw_leader", "eccentricity")], rep["verdict"]
-    assert_no_sensor_worse(rep)
+    assert_no_sensor_worse(rep["gap"])

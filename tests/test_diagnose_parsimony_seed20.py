@@ -49,7 +49,7 @@ def test_one_source_and_no_shaft(cases):
     tried = rep["structure"]["parsimony"]["tried"]
     refused = [t for t in tried if t["reason"] and "takes a source's place with a shaft" in t["reason"]]
     assert refused, [(t["name"], t["reason"]) for t in tried]
-    assert_no_sensor_worse(rep)
+    assert_no_sensor_worse(rep["gap"])
 
 
 def test_the_weak_second_source_stays(cases):
@@ -57,4 +57,4 @@ def test_the_weak_second_source_stays(cases):
     found = sorted((e["element"], e["kind"]) for e in rep["effects"])
     zones = sorted("unwind" if el in UNWIND_ZONE else "rewind" if el in REWIND_ZONE else el for el, _ in found)
     assert zones == ["rewind", "unwind"] and all(k == "eccentricity" for _, k in found), rep["verdict"]
-    assert_no_sensor_worse(rep)
+    assert_no_sensor_worse(rep["gap"])

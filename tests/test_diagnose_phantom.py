@@ -15,6 +15,7 @@ Built and scored by the independent benchmark's own code (truth: monolithic
 fast engine, a 10 s record at 250 Hz; diagnosis run blind in a subprocess).
 """
 import pytest
+from records import assert_no_sensor_worse
 
 from webline.diagnosis import benchmark as B
 from webline.diagnosis import benchmark_independent as BI
@@ -70,9 +71,7 @@ def test_the_second_zone_line_is_the_form_not_a_source(case_result):
     # the form it chose explains at least RECOVER of what the dropped source explained, per sensor
     tried = st["parsimony"]["tried"][-1]
     assert tried["accepted"]
-    # no sensor worse than the nominal model
-    for s, g in rep["gap"].items():
-        assert g["refined"]["nrmse"] <= 1.02 * g["nominal"]["nrmse"], s
+    assert_no_sensor_worse(rep["gap"])
 
 
 # ------------------------------------------------------------ the rule on numbers ----
