@@ -222,48 +222,26 @@ def achievable_for(d, noise, ctxs, s):
 # ================================================================ what is left ====
 def leftovers(d, noise, remaining_peaks):
     """Per sensor after refinement: each reported periodic effect's harmonics
-    left (share of what the nominal residual held, fit runs), the untagged
-    peaks left, the noise floor."""
+    left (share of what the nominal residual held, fit runs; ``held_out`` the
+    same on the held-out runs, where a transfer the fit absorbed into the
+    estimate shows), the untagged peaks left, the noise floor."""
     last = d.steps[-1]["sims"]
     fit = d.fit_ctx()
+    hold = [c for c in d.ctx if c not in fit]
     sensors = list(dict.fromkeys(s for c in d.ctx for s in c.sensors))
     out = {}
     for s in sensors:
         effs = []
         for fe in d.final_effects:
             k = fe["ranked"][0]["cand"]
-            e_nom = e_ref = z_ref = 0.0
-            amp_nom, amp_ref, n_terms = {}, {}, 0
-            z_order = {}
-            for c in fit:
-                orders = d.orders_for(c, k.key)
-                if not orders or s not in c.sensors:
-                    continue
-                th = d._theta_refined(c, k)
-                f = np.array(orders) * c.freq[k.key] * (1.0 + c.kappa.get(k.key, 0.0))
-                Yn = est.fit_harmonics(est.split_slow_periodic(c.meas[s] - c.nominal.columns[s], c.fs, c.fc)[1],
-                                       th, orders, c.mask)
-                Yr = est.fit_harmonics(est.split_slow_periodic(c.meas[s] - last[c.name].columns[s], c.fs, c.fc)[1],
-                                       th, orders, c.mask)
-                e_nom += float(np.sum(np.abs(Yn) ** 2))
-                e_ref += float(np.sum(np.abs(Yr) ** 2))
-                z = est.harmonic_z(Yr, f, c.floors[s], c.T)
-                z_ref += float(np.sum(z))
-                n_terms += len(orders)
-                for j, a, b, zj in zip(orders, Yn, Yr, z):
-                    amp_nom.setdefault(j, []).append(abs(a))
-                    amp_ref.setdefault(j, []).append(abs(b))
-                    z_order.setdefault(j, []).append(float(zj))
-            if not n_terms:
+            rec = _effect_left(d, k, fit, s, last)
+            if rec is None:
                 continue
-            effs.append({"element": k.element, "kind": k.kind, "orders": sorted(amp_nom),
-                         "amplitude_nominal_N": [float(np.mean(amp_nom[j])) for j in sorted(amp_nom)],
-                         "amplitude_left_N": [float(np.mean(amp_ref[j])) for j in sorted(amp_ref)],
-                         "share_left": e_ref / e_nom if e_nom > 0 else None,
-                         "z_left": z_ref, "n_terms": n_terms,
-                         # what is left is more than noise at these orders
-                         "significant": bool(z_ref > n_terms + 3.0 * math.sqrt(2.0 * n_terms) + 9.0),
-                         "by_order": [_order_left(j, amp_nom[j], amp_ref[j], z_order[j]) for j in sorted(amp_nom)]})
+            # independent seed-21 c05: roller9's order 2 fitted in the one fit run beside a leader
+            # shaft's 11.4 Hz mode the model lacks; at the held-out run's speed the line (12.7 Hz)
+            # passes that mode otherwise, and 0.83 N of it stays on lc9
+            rec["held_out"] = _effect_left(d, k, hold, s, last) if hold else None
+            effs.append(rec)
         untagged = []
         for rname, per in (remaining_peaks or {}).items():
             for p in per.get(s, []):
@@ -272,6 +250,44 @@ def leftovers(d, noise, remaining_peaks):
         out[s] = {"effects": effs, "untagged_peaks_left": untagged,
                   "noise_floor_rms_N": {c.name: noise[c.name][s]["rms_N"] for c in d.ctx if s in c.sensors}}
     return out
+
+
+def _effect_left(d, k, ctxs, s, last):
+    """Effect ``k``'s harmonics on sensor ``s`` over runs ``ctxs``: measured minus
+    nominal and measured minus refined (``last``), on the refined angle; None if
+    no run carries them."""
+    e_nom = e_ref = z_ref = 0.0
+    amp_nom, amp_ref, n_terms = {}, {}, 0
+    z_order = {}
+    for c in ctxs:
+        orders = d.orders_for(c, k.key)
+        if not orders or s not in c.sensors:
+            continue
+        th = d._theta_refined(c, k)
+        f = np.array(orders) * c.freq[k.key] * (1.0 + c.kappa.get(k.key, 0.0))
+        Yn = est.fit_harmonics(c.periodic[s], th, orders, c.mask)   # measured minus nominal, split once per run
+        Yr = est.fit_harmonics(est.split_slow_periodic(c.meas[s] - last[c.name].columns[s], c.fs, c.fc)[1],
+                               th, orders, c.mask)
+        e_nom += float(np.sum(np.abs(Yn) ** 2))
+        e_ref += float(np.sum(np.abs(Yr) ** 2))
+        z = est.harmonic_z(Yr, f, c.floors[s], c.T)
+        z_ref += float(np.sum(z))
+        n_terms += len(orders)
+        for j, a, b, zj in zip(orders, Yn, Yr, z):
+            amp_nom.setdefault(j, []).append(abs(a))
+            amp_ref.setdefault(j, []).append(abs(b))
+            z_order.setdefault(j, []).append(float(zj))
+    if not n_terms:
+        return None
+    return {"element": k.element, "kind": k.kind, "orders": sorted(amp_nom),
+            "runs": [c.name for c in ctxs if d.orders_for(c, k.key) and s in c.sensors],
+            "amplitude_nominal_N": [float(np.mean(amp_nom[j])) for j in sorted(amp_nom)],
+            "amplitude_left_N": [float(np.mean(amp_ref[j])) for j in sorted(amp_ref)],
+            "share_left": e_ref / e_nom if e_nom > 0 else None,
+            "z_left": z_ref, "n_terms": n_terms,
+            # what is left is more than noise at these orders
+            "significant": bool(z_ref > n_terms + 3.0 * math.sqrt(2.0 * n_terms) + 9.0),
+            "by_order": [_order_left(j, amp_nom[j], amp_ref[j], z_order[j]) for j in sorted(amp_nom)]}
 
 
 def _order_left(j, a_nom, a_ref, z):

@@ -305,6 +305,11 @@ def test_form_feedforward_none_found_and_run_out_recovered(tmp_path, monkeypatch
     assert_no_sensor_worse(rep["holdout"]["out_of_sample"])
     g9 = rep["holdout"]["out_of_sample"]["lc9.T"]
     assert g9["closed_share"] > 0.5
+    # ... and so does the dominant order's line: the held-out run keeps little of it
+    from webline.diagnosis.report import HELD_OUT_LEFT
+    h = rep["left"]["lc9.T"]["effects"][0]["held_out"]
+    assert h["runs"] == ["h1"]
+    assert next(o for o in h["by_order"] if o["order"] == 2)["share_left"] < HELD_OUT_LEFT
     # the noise floor comes from the data: 0.3 N was added
     for s, v in rep["noise_floor"]["r1"].items():
         assert v["rms_N"] == pytest.approx(0.3, rel=0.1), s
@@ -494,3 +499,25 @@ def test_a_weak_roll_beside_a_strong_idler_is_screened_on_what_the_idler_left():
     assert c.kappa[unw.key] == pytest.approx(0.0195, abs=0.002)
     second = {x["element"]: x for x in d.screen_log[1]}["unwind"]
     assert second["coherence"] > 0.9 and second["share"] < 0.01 <= second["share_left"]
+
+
+def test_held_out_lines_left_are_named():
+    """report.held_out_left: a reported effect's order the refined model leaves on a
+    held-out run (significant, at least HELD_OUT_LEFT of its line) is named, largest
+    first; one below the share or within noise is not (constructed records in the
+    report's ``left`` shape)."""
+    from webline.diagnosis.report import HELD_OUT_LEFT, held_out_left
+
+    def eff(el, orders):
+        return {"element": el, "kind": "eccentricity", "held_out": {"runs": ["run2"], "by_order": [
+            {"order": j, "share_left": sh, "significant": sig} for j, sh, sig in orders]}}
+    rep = {"left": {
+        "lc9.T": {"effects": [eff("roller9", [(1, 0.02, True), (2, 0.9, True), (3, 0.8, False)])]},
+        "lc19.T": {"effects": [eff("roller9", [(1, HELD_OUT_LEFT, True)]),
+                               {"element": "x", "kind": "eccentricity", "held_out": None}]}}}
+    got = held_out_left(rep)
+    assert len(got) == 2
+    assert "order(s) 2," in got[0] and "90 %" in got[0] and "lc9.T" in got[0] and "run2" in got[0]
+    assert "order(s) 1," in got[1] and "lc19.T" in got[1]
+    below = {"left": {"lc9.T": {"effects": [eff("roller9", [(2, 0.99 * HELD_OUT_LEFT, True)])]}}}
+    assert held_out_left(below) == [] and held_out_left({}) == []
