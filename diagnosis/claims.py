@@ -292,7 +292,7 @@ def _effect_left(d, k, ctxs, s, last):
 
 def _order_left(j, a_nom, a_ref, z):
     """One order's harmonic left on one sensor: share of the nominal energy and
-    whether what is left is more than noise (summed z over the fit runs is
+    whether what is left is more than noise (summed z over the runs, fit or held out, is
     Gamma(runs, 1) for noise alone; significant below p = 1e-5)."""
     e_nom = float(np.sum(np.square(a_nom)))
     return {"order": int(j), "share_left": float(np.sum(np.square(a_ref))) / e_nom if e_nom > 0 else None,
