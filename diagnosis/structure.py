@@ -1096,10 +1096,7 @@ def own_lines(own):
     mostly 1/f noise), seed-19 c24 25 % (20 %), seed-8 c05 7.2 % (5.8 %), seed-11 c05
     8.4 % (8.0 %), seed-11 c12 2.3 % (2.1 %, still dropped); phantoms seed-3 c13 0.82 %
     (0.74 %), seed-2 c07 0.19 % (0.17 %), seed-9 c22 -0.17 %, seed-3 c04 0, seed-0 c07
-    no order left in large part. An order's share left without it counts up to the whole
-    line (1): capped, the real sources above keep their sums (seed-19 c24 25 %, seed-11
-    c05 8.4 %, seed-8 c05 7.2 %, seed-20 c24 7.0 %; one of seed-19 c24's forms 9.3 -> 8.3 %),
-    the phantom seed-21 c07 falls from 6.2 % to 3.8 %."""
+    no order left in large part."""
     sums = {}
     for o in own:
         # the orders the form leaves in large part: a few per cent of the primary's large lines (its
@@ -1107,11 +1104,7 @@ def own_lines(own):
         if o.get("share_of_gap") is None or o["left_without"] is None or o["left_without"] < OWN_ORDER_LEFT:
             continue
         k = (o["element"], o["run"], o["sensor"])
-        # at most the data's whole line is the source's own: a form that leaves more than the line
-        # puts a wrong line there from the primary (its transfer at that order), which no second
-        # source answers for (independent seed-21 c07: a phantom idler_u1's order 5 on lc9, 1.42 of
-        # the line left beside a real idler_r1 whose 20 Hz line the model passes on wrong)
-        gain = o["share_of_gap"] * (min(o["left_without"], 1.0) - (o["left_full"] or 0.0))
+        gain = o["share_of_gap"] * (o["left_without"] - (o["left_full"] or 0.0))
         sums.setdefault(k, []).append((gain, o["order"]))
     if not sums:
         return None

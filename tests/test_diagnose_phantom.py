@@ -269,15 +269,6 @@ def test_own_lines_on_measured_orders():
     got = own_lines(real)
     assert (got["sensor"], got["orders"][0]) == ("lc9.T", 1)
     assert got["share"] >= OWN_LINES_KEEP
-    # seed-21 c07 (phantom idler_u1 at the real idler_r1's frequency; the truth's order 5, 0.52 mm, passed
-    # to lc9 wrong by the model): 'feedforward reference + web damping 2 ms' without it leaves 1.42 of the
-    # order-5 line on lc9 (5.6 % of its gap), the full set 0.32: the excess over the line is the primary's
-    phantom = [row("idler_u1", 1, "lc9.T", 0.0053, 0.0002, 0.9022), row("idler_u1", 5, "lc9.T", 1.4155, 0.3150, 0.0557),
-               row("idler_u1", 6, "lc9.T", 2.4666, 0.3366, 0.0003), row("idler_u1", 4, "lc19.T", 0.2987, 1.1880, 0.0002)]
-    got = own_lines(phantom)
-    assert got["orders"] == [5, 6]
-    assert got["share"] == pytest.approx(0.0557 * (1 - 0.3150) + 0.0003 * (1 - 0.3366))
-    assert got["share"] < OWN_LINES_KEEP < 0.0557 * (1.4155 - 0.3150)
     # summed per run and sensor; nothing recorded, nothing to sum
     split = [row("x", 4, "lc9.T", 1.0, 0.0, 0.01, run=r) for r in ("run1", "run2")]
     assert own_lines(split)["share"] == pytest.approx(0.01)
