@@ -519,5 +519,8 @@ def test_held_out_lines_left_are_named():
     assert len(got) == 2
     assert "order(s) 2," in got[0] and "90 %" in got[0] and "lc9.T" in got[0] and "run2" in got[0]
     assert "order(s) 1," in got[1] and "lc19.T" in got[1]
+    # more than the nominal model left there: said as a multiple
+    more = held_out_left({"left": {"lc9.T": {"effects": [eff("roller9", [(4, 12.0, True)])]}}})
+    assert len(more) == 1 and "12 x the line the nominal model left" in more[0]
     below = {"left": {"lc9.T": {"effects": [eff("roller9", [(2, 0.99 * HELD_OUT_LEFT, True)])]}}}
     assert held_out_left(below) == [] and held_out_left({}) == []
