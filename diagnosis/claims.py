@@ -227,7 +227,7 @@ def leftovers(d, noise, remaining_peaks):
     estimate shows), the untagged peaks left, the noise floor."""
     last = d.steps[-1]["sims"]
     fit = d.fit_ctx()
-    hold = [c for c in d.ctx if c not in fit]
+    hold = [c for c in d.ctx if not c.fit]
     sensors = list(dict.fromkeys(s for c in d.ctx for s in c.sensors))
     out = {}
     for s in sensors:
@@ -258,11 +258,12 @@ def _effect_left(d, k, ctxs, s, last):
     no run carries them."""
     e_nom = e_ref = z_ref = 0.0
     amp_nom, amp_ref, n_terms = {}, {}, 0
-    z_order = {}
+    z_order, runs = {}, []
     for c in ctxs:
         orders = d.orders_for(c, k.key)
         if not orders or s not in c.sensors:
             continue
+        runs.append(c.name)
         th = d._theta_refined(c, k)
         f = np.array(orders) * c.freq[k.key] * (1.0 + c.kappa.get(k.key, 0.0))
         Yn = est.fit_harmonics(c.periodic[s], th, orders, c.mask)   # measured minus nominal, split once per run
@@ -280,7 +281,7 @@ def _effect_left(d, k, ctxs, s, last):
     if not n_terms:
         return None
     return {"element": k.element, "kind": k.kind, "orders": sorted(amp_nom),
-            "runs": [c.name for c in ctxs if d.orders_for(c, k.key) and s in c.sensors],
+            "runs": runs,
             "amplitude_nominal_N": [float(np.mean(amp_nom[j])) for j in sorted(amp_nom)],
             "amplitude_left_N": [float(np.mean(amp_ref[j])) for j in sorted(amp_ref)],
             "share_left": e_ref / e_nom if e_nom > 0 else None,
