@@ -1074,7 +1074,7 @@ def own_orders(d, full, r, sec):
     return out
 
 
-def own_lines(own):
+def own_lines(own, better=()):
     """The secondary source's own lines that the form leaves, as one number (the rule of
     :data:`OWN_LINES_KEEP`): per source, run and sensor, over the orders the set without it in the
     form leaves in large part (at least :data:`OWN_ORDER_LEFT` of the line), the sum of
@@ -1104,7 +1104,8 @@ def own_lines(own):
         if o.get("share_of_gap") is None or o["left_without"] is None or o["left_without"] < OWN_ORDER_LEFT:
             continue
         k = (o["element"], o["run"], o["sensor"])
-        gain = o["share_of_gap"] * (o["left_without"] - (o["left_full"] or 0.0))
+        left = min(o["left_without"], 1.0) if o["sensor"] in better else o["left_without"]
+        gain = o["share_of_gap"] * (left - (o["left_full"] or 0.0))
         sums.setdefault(k, []).append((gain, o["order"]))
     if not sums:
         return None
@@ -1161,7 +1162,7 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms):
         rows, why = parsimony_rule(full["nrmse"], without["nrmse"], r["nrmse"], r["form"], floor)
         why = why or shaft_swap_refused(r, full, drive_forms)
         own = [o for o in own_orders(d, full, r, sec) if o["z"] > ORDER_Z]
-        lines = own_lines(own)
+        lines = own_lines(own, better={s_ for s_, v in r["nrmse"].items() if v <= full["nrmse"][s_]})
         if why is None and lines is not None and lines["share"] >= OWN_LINES_KEEP:
             why = (f"{lines['element']}'s own lines (orders {', '.join(map(str, lines['orders']))}) that "
                    f"'{r['form']}' leaves on {lines['sensor']} in {lines['run']} carry "
