@@ -1096,7 +1096,16 @@ def own_lines(own, better=()):
     mostly 1/f noise), seed-19 c24 25 % (20 %), seed-8 c05 7.2 % (5.8 %), seed-11 c05
     8.4 % (8.0 %), seed-11 c12 2.3 % (2.1 %, still dropped); phantoms seed-3 c13 0.82 %
     (0.74 %), seed-2 c07 0.19 % (0.17 %), seed-9 c22 -0.17 %, seed-3 c04 0, seed-0 c07
-    no order left in large part."""
+    no order left in large part.
+
+    ``better``: the sensors on which the form without the source fits at least as well
+    as the full set. There a line left beyond the data's own (left_without > 1) is the
+    primary's transfer at that order, which the form gets wrong, not the secondary's: it
+    counts up to the whole line. Seed-21 c07's phantom idler_u1 left 1.42 of idler_r1's
+    order 5 on lc9 in a form that fit lc9 better without it (0.476 against 0.539): 6.2 %
+    uncapped, 3.8 % capped. Capped on every sensor (tried, twenty-seventh session) it
+    lost seed-20 c24's real roller9, whose form fit lc9 worse without it (1.024 against
+    0.980) and left 11.8 x its order 1 there: 17.3 % uncapped, 1.6 % capped."""
     sums = {}
     for o in own:
         # the orders the form leaves in large part: a few per cent of the primary's large lines (its
@@ -1104,6 +1113,8 @@ def own_lines(own, better=()):
         if o.get("share_of_gap") is None or o["left_without"] is None or o["left_without"] < OWN_ORDER_LEFT:
             continue
         k = (o["element"], o["run"], o["sensor"])
+        # beyond the data's own line, where the form fits better without the source, the excess is
+        # the primary's transfer at that order, not the secondary's line
         left = min(o["left_without"], 1.0) if o["sensor"] in better else o["left_without"]
         gain = o["share_of_gap"] * (left - (o["left_full"] or 0.0))
         sums.setdefault(k, []).append((gain, o["order"]))

@@ -269,6 +269,23 @@ def test_own_lines_on_measured_orders():
     got = own_lines(real)
     assert (got["sensor"], got["orders"][0]) == ("lc9.T", 1)
     assert got["share"] >= OWN_LINES_KEEP
+    # seed-21 c07 (phantom idler_u1 beside idler_r1, one frequency): 'feedforward reference + web
+    # damping 2 ms' without it fits lc9 better than the full set and leaves 1.42 of order 5 there;
+    # beyond the line the excess is the primary's transfer: counted up to the line, under the rule
+    c07 = [row("idler_u1", 1, "lc9.T", 0.00534, 0.000148, 0.902), row("idler_u1", 4, "lc9.T", 0.345, 0.0053, 0.00117),
+           row("idler_u1", 5, "lc9.T", 1.4155, 0.315, 0.0557), row("idler_u1", 6, "lc9.T", 2.467, 0.337, 0.000256)]
+    assert own_lines(c07)["share"] >= OWN_LINES_KEEP
+    got = own_lines(c07, better={"lc9.T", "lc19.T"})
+    assert got["orders"] == [5, 6] and got["share"] < OWN_LINES_KEEP
+    assert got["share"] == pytest.approx(0.0557 * (1 - 0.315) + 0.000256 * (1 - 0.337))
+    # seed-20 c24 (roller9 real): the same form without it fits lc9 worse (1.024 against 0.980) and
+    # leaves 11.8 x its order 1 there: not capped, kept
+    c24 = [row("roller9", 1, "lc9.T", 11.78, 0.0098, 0.01443), row("roller9", 3, "lc9.T", 1.672, 0.0268, 0.00217),
+           row("roller9", 4, "lc9.T", 0.313, 0.180, 0.01186), row("roller9", 5, "lc9.T", 0.170, 0.0030, 0.0440),
+           row("roller9", 1, "lc19.T", 0.039, 0.00036, 0.5005)]
+    got = own_lines(c24, better={"lc19.T"})
+    assert (got["sensor"], got["orders"]) == ("lc9.T", [1, 3]) and got["share"] >= OWN_LINES_KEEP
+    assert own_lines(c24, better={"lc9.T", "lc19.T"})["share"] < OWN_LINES_KEEP
     # summed per run and sensor; nothing recorded, nothing to sum
     split = [row("x", 4, "lc9.T", 1.0, 0.0, 0.01, run=r) for r in ("run1", "run2")]
     assert own_lines(split)["share"] == pytest.approx(0.01)
