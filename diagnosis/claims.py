@@ -81,8 +81,7 @@ def local_energy(d, sims, local):
             th = d._theta_refined(c, cand)
             f = np.array(orders) * c.freq[cand.key] * (1.0 + c.kappa.get(cand.key, 0.0))
             for s in c.sensors:
-                r = est.split_slow_periodic(c.meas[s] - sims[c.name].columns[s], c.fs, c.fc)[1]
-                Y = est.fit_harmonics(r, th, orders, c.mask)
+                Y = est.fit_harmonics(c.left(s, sims[c.name]), th, orders, c.mask)
                 E += float(np.sum(np.abs(Y) ** 2))
                 z += float(np.sum(est.harmonic_z(Y, f, c.floors[s], c.T)))
         else:
@@ -267,8 +266,7 @@ def _effect_left(d, k, ctxs, s, last):
         th = d._theta_refined(c, k)
         f = np.array(orders) * c.freq[k.key] * (1.0 + c.kappa.get(k.key, 0.0))
         Yn = est.fit_harmonics(c.periodic[s], th, orders, c.mask)   # measured minus nominal, split once per run
-        Yr = est.fit_harmonics(est.split_slow_periodic(c.meas[s] - last[c.name].columns[s], c.fs, c.fc)[1],
-                               th, orders, c.mask)
+        Yr = est.fit_harmonics(c.left(s, last[c.name]), th, orders, c.mask)
         e_nom += float(np.sum(np.abs(Yn) ** 2))
         e_ref += float(np.sum(np.abs(Yr) ** 2))
         z = est.harmonic_z(Yr, f, c.floors[s], c.T)

@@ -139,6 +139,11 @@ class RunCtx:
         weighed four times a 250 Hz one of the same length; seed-19 c02)."""
         return float(np.sum(np.asarray(x)[self.mask if mask is None else mask] ** 2)) / self.fs
 
+    def left(self, s, sim):
+        """The periodic part of what simulated columns ``sim`` leave of sensor ``s``:
+        measured minus simulated, the slow part (below ``fc``) removed."""
+        return est.split_slow_periodic(self.meas[s] - sim.columns[s], self.fs, self.fc)[1]
+
 
 # ================================================================ the pipeline ====
 class Diagnosis:
@@ -851,6 +856,13 @@ class Diagnosis:
         ref = 0.5 * (th[m][0] + th[m][-1])
         return est.scaled_angle(th, kap, ref)
 
+    def harmonics(self, c, k, y):
+        """Candidate ``k``'s orders in run ``c`` and their complex amplitudes in the
+        periodic part of ``y``, on the refined angle."""
+        orders = self.orders_for(c, k.key)
+        r = est.split_slow_periodic(y, c.fs, c.fc)[1]
+        return orders, est.fit_harmonics(r, self._theta_refined(c, k), orders, c.mask)
+
     # ------------------------------------------------------------ 5 estimate ----
     def estimate(self):
         fit = self.fit_ctx()
@@ -1312,9 +1324,8 @@ class Diagnosis:
                 continue
             th = self._theta_refined(c, k)
             for s in c.sensors:
-                r = est.split_slow_periodic(c.meas[s] - sims[c.name].columns[s], c.fs, c.fc)[1]
                 m = np.zeros(H, complex)
-                for j, y in zip(orders, est.fit_harmonics(r, th, orders, c.mask)):
+                for j, y in zip(orders, est.fit_harmonics(c.left(s, sims[c.name]), th, orders, c.mask)):
                     m[j - 1] = y
                 Ms.append(m)
         return np.array(Ms) if Ms else None

@@ -383,8 +383,7 @@ def _remaining(d):
         fams = {k.element: c.freq[k.key] for k in d.cands if c.freq[k.key] > 0}
         out[c.name] = {}
         for s in c.sensors:
-            from webline.diagnosis.estimate import split_slow_periodic
-            r = split_slow_periodic(c.meas[s] - sim.columns[s], c.fs, c.fc)[1][c.mask]
+            r = c.left(s, sim)[c.mask]
             f, a = spectra.amplitude_spectrum(r, c.fs)
             pk = spectra.spectral_peaks(f, a, fmin=max(c.fc, 2 * c.fs / len(r)))
             res = spectra.frequency_resolution(len(r), c.fs)

@@ -389,13 +389,6 @@ def _effects_to_screen(d):
     return out
 
 
-def _harmonics(d, c, cand, y_minus_model):
-    orders = d.orders_for(c, cand.key)
-    th = d._theta_refined(c, cand)
-    r = est.split_slow_periodic(y_minus_model, c.fs, c.fc)[1]
-    return orders, est.fit_harmonics(r, th, orders, c.mask)
-
-
 def _joint_fit(M, Gs, W, keeps):
     """Per order, the complex amplitudes of several effects whose responses ``Gs``
     (each [rows, H], on one angle) add up to the measured harmonics ``M`` (weighted
@@ -542,7 +535,7 @@ def screen(d):
             return claims.local_energy(d, sims, ("all", None))[0]
         e = 0.0
         for cand, _, _ in effs:
-            M, _ = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, c.meas[s] - sims[c.name].columns[s]))
+            M, _ = _stack(d, cand, lambda c, s: d.harmonics(c, cand, c.meas[s] - sims[c.name].columns[s]))
             e += float(np.sum(np.abs(M) ** 2))
         return e
 
@@ -618,14 +611,14 @@ def screen(d):
                 keep = np.abs(X0) > 0
                 # each member's response on its own angle (for the polish) and on the lead's (the joint fit)
                 for on in ((cand, lead) if cand is not lead else (cand,)):
-                    Hp, W = _stack(d, on, lambda c, s_: _harmonics(d, c, on, pr[c.name].columns[s_]
+                    Hp, W = _stack(d, on, lambda c, s_: d.harmonics(c, on, pr[c.name].columns[s_]
                                                                    - nom_alt[c.name].columns[s_]))
                     G = np.where(keep[None, :], Hp / np.where(keep, X0, 1.0)[None, :], 0.0)
                     if on is cand:
                         Gs[cand.element] = (G, W, keep)
                 Gm.append(G)
                 keeps.append(keep)
-            M, W = _stack(d, lead, lambda c, s_: _harmonics(d, c, lead, c.meas[s_] - nom_alt[c.name].columns[s_]))
+            M, W = _stack(d, lead, lambda c, s_: d.harmonics(c, lead, c.meas[s_] - nom_alt[c.name].columns[s_]))
             Xj = _joint_fit(M, Gm, W, keeps)
             big = 3.0 * max(float(np.max(np.abs(X0))) for _c, X0 in members)
             if len(members) > 1 and max(float(np.max(np.abs(X))) for X in Xj) > big:
@@ -731,7 +724,7 @@ def screen(d):
                 if cand.element not in Gs:
                     continue
                 G, W, keep = Gs[cand.element]
-                Mp, _ = _stack(d, cand, lambda c, s_: _harmonics(d, c, cand, c.meas[s_] - sims1[c.name].columns[s_]))
+                Mp, _ = _stack(d, cand, lambda c, s_: d.harmonics(c, cand, c.meas[s_] - sims1[c.name].columns[s_]))
                 dX, _ = est.solve_fourier(Mp, G, W)
                 X2s[cand.element] = np.where(keep, X1s[cand.element] + dX, 0.0)
             sims2 = sim_fit(with_all(alt0, X2s), f"structure {name} polish")
@@ -1058,9 +1051,9 @@ def own_orders(d, full, r, sec):
                 # c24: the real idler_u1's own lines on lc9 carry 3.5 % of the whole gap, 7.0 % of
                 # its periodic part)
                 e_gap = float(np.mean(c.periodic[s][c.mask] ** 2))
-                orders, Yd = _harmonics(d, c, cand, gap)
-                _, Yw = _harmonics(d, c, cand, c.meas[s] - r["sims"][c.name].columns[s])
-                _, Yf = _harmonics(d, c, cand, c.meas[s] - full["sims"][c.name].columns[s])
+                orders, Yd = d.harmonics(c, cand, gap)
+                _, Yw = d.harmonics(c, cand, c.meas[s] - r["sims"][c.name].columns[s])
+                _, Yf = d.harmonics(c, cand, c.meas[s] - full["sims"][c.name].columns[s])
                 f = c.freq[cand.key] * (1.0 + c.kappa.get(cand.key, 0.0))   # as claims.local_energy
                 z = est.harmonic_z(Yd, np.asarray(orders) * f, c.floors[s], c.T)
                 for j, zj, yd, yw, yf in zip(orders, z, Yd, Yw, Yf):
@@ -1195,7 +1188,7 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms):
     rows = tried[-1]["sensors"]
     e_r = 0.0
     for cand, _, _ in effs:
-        M, _ = _stack(d, cand, lambda c, s: _harmonics(d, c, cand, c.meas[s] - r["sims"][c.name].columns[s]))
+        M, _ = _stack(d, cand, lambda c, s: d.harmonics(c, cand, c.meas[s] - r["sims"][c.name].columns[s]))
         e_r += float(np.sum(np.abs(M) ** 2))
     per = "; ".join(f"{s_} {v['full']:.3g} -> {v['without_in_form']:.3g} (without them as modelled "
                     f"{v['without_in_layout_form']:.3g})" for s_, v in rows.items())
