@@ -550,8 +550,8 @@ def other_runs(d, noise, hump, c, rigid_doc, rigid_levels, b):
     modelled fits run2 within noise. True shafts with a second run, re-diagnosed with a
     probe, shaft against rigid line in the held-out run: seed-11 c21's unwind 2.07 x against
     2.36 x, seed-16 c21's rewind 1.54 x against 4.19 x, seed-19 c21's rewind 4.13 x against
-    5.06 x, seed-20 c05's S-wrap leader 15.2 x against 60.7 x: 0.25-0.88 of the rigid line's,
-    the phantom 4.1)."""
+    5.06 x, seed-20 c05's S-wrap leader 15.2 x against 60.7 x, seed-20 c21's rewind 0.63 x
+    against 0.95 x: 0.25-0.88 of the rigid line's, the phantom 4.1)."""
     out = []
     for c2 in d.ctx:
         if c2 is c:

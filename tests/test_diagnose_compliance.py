@@ -385,3 +385,30 @@ def test_the_rigid_forms_a_shaft_must_beat_include_a_current_lag_in_every_drive(
     # a line without speed loops has no lag to add
     monkeypatch.setattr(structure, "alternatives", lambda d: [("web damping 2 ms", "", {"web.damping": "2 ms"})])
     assert [n for n, _, _ in compliance.rigid_forms(None)] == ["web damping 2 ms"]
+
+
+def test_floors_under_fixed_levels_recover_the_floors_and_predict_exactly():
+    """compliance._floors_under: with the drives' levels held at the ones that made the
+    spectrum, the white and 1/f floors are recovered and the prediction is exact; held at
+    four times a drive's level, the prediction misses where that drive's response sits."""
+    f = np.arange(0.25, 20.0, 0.25)
+    band = (1.25, 5.0)
+    mode = 1.0 / ((1 - (f / 3.0) ** 2) ** 2 + (2 * 0.1 * f / 3.0) ** 2)
+    G = {"unwind": {"lc9.T": mode * 1e-3, "lc19.T": mode * 2e-4},
+         "rewind": {"lc9.T": np.full_like(f, 1e-4), "lc19.T": np.full_like(f, 5e-4)}}
+    Gx = dict(G)
+    for s in ("lc9.T", "lc19.T"):
+        Gx[f"_white {s}"] = {q: (np.full_like(f, 1e-4) if q == s else np.zeros_like(f)) for q in G["unwind"]}
+        Gx[f"_pink {s}"] = {q: (1e-4 * band[0] / f if q == s else np.zeros_like(f)) for q in G["unwind"]}
+    truth = {"unwind": 4.0, "rewind": 2.0, "_white lc9.T": 3.0, "_pink lc9.T": 1.5,
+             "_white lc19.T": 0.5, "_pink lc19.T": 2.5}
+    P = {s: sum(a * Gx[k][s] for k, a in truth.items()) for s in ("lc9.T", "lc19.T")}
+    levels, R = compliance._floors_under(P, Gx, {"unwind": 4.0, "rewind": 2.0}, f, band)
+    for k in truth:
+        assert levels[k] == pytest.approx(truth[k], rel=1e-9)
+    m = (f >= band[0]) & (f <= band[1])
+    for s in P:
+        np.testing.assert_allclose(R[s][m], P[s][m], rtol=1e-9)
+    _, R4 = compliance._floors_under(P, Gx, {"unwind": 16.0, "rewind": 2.0}, f, band)
+    top = int(np.argmin(abs(f - 3.0)))
+    assert R4["lc9.T"][top] > 2.0 * P["lc9.T"][top]
