@@ -30,7 +30,6 @@ import logging
 import math
 
 import numpy as np
-from scipy import optimize
 
 from webline.diagnosis import claims, others, regress, ripple
 from webline.diagnosis import estimate as est
@@ -182,14 +181,9 @@ def spectral_fit(d, noise, doc, sims, hump, G=None, lines_out=False, levels=None
 def _floors_under(P, Gx, fixed, f, band):
     """:func:`ripple.fit_levels` with the drives' levels (density^2) held at ``fixed``:
     the floors (the keys of ``Gx`` starting with '_') fitted to what they leave."""
-    m = (f >= band[0]) & (f <= band[1])
     R0 = {s: sum(fixed[e] * Gx[e][s] for e in fixed) for s in P}
-    names = [k for k in Gx if k.startswith("_")]
-    A = np.vstack([np.column_stack([Gx[k][s][m] / np.maximum(P[s][m], 1e-300) for k in names]) for s in P])
-    b = np.concatenate([(P[s][m] - R0[s][m]) / np.maximum(P[s][m], 1e-300) for s in P])
-    a, _ = optimize.nnls(A, b)
-    levels = {**fixed, **dict(zip(names, (float(x) for x in a)))}
-    return levels, {s: R0[s] + sum(levels[k] * Gx[k][s] for k in names) for s in P}
+    floors, Rf = ripple.fit_levels(P, {k: v for k, v in Gx.items() if k.startswith("_")}, R0, f, band=band)
+    return {**fixed, **floors}, {s: R0[s] + Rf[s] for s in P}
 
 
 def misfit_floor(c):

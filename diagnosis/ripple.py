@@ -104,9 +104,10 @@ def responses(d, doc, sims, view=None):
 
 def fit_levels(P, G, S0, f, band=BAND_HZ):
     """Ripple density^2 per drive (>= 0) so that sum_e a_e G[e][s] fits P[s] - S0[s]
-    over ``band``, each bin weighted by 1/P (relative error). ``P``, ``S0`` by sensor,
-    ``G`` {drive: {sensor: PSD per unit density^2}}. Returns ({drive: a_e}, explained
-    PSD {sensor: sum_e a_e G})."""
+    over ``band``, each bin weighted by 1/P (relative error). ``P``, ``S0`` by sensor
+    (``S0[s]`` a level or a PSD on ``f``: what is held fixed under the fit), ``G``
+    {drive: {sensor: PSD per unit density^2}}. Returns ({drive: a_e}, explained PSD
+    {sensor: sum_e a_e G})."""
     names = [e for e in G if all(s in G[e] for s in P)]
     if not names:
         return {}, {s: np.zeros_like(P[s]) for s in P}
@@ -115,7 +116,8 @@ def fit_levels(P, G, S0, f, band=BAND_HZ):
     for s in P:
         w = 1.0 / np.maximum(P[s][m], 1e-300)
         A.append(np.column_stack([G[e][s][m] * w for e in names]))
-        b.append((P[s][m] - S0[s]) * w)
+        s0 = np.asarray(S0[s], float)
+        b.append((P[s][m] - (s0[m] if s0.ndim else s0)) * w)
     a, _ = optimize.nnls(np.vstack(A), np.concatenate(b))
     levels = dict(zip(names, (float(x) for x in a)))
     return levels, {s: sum(levels[e] * G[e][s] for e in names) for s in P}
