@@ -34,6 +34,12 @@ def measured_run(folder, name, truth_layout, exp, *, exp_true=None, seed=0, nois
     return folder / f"{name}.yaml"
 
 
+# the EWL layout's equal-radius idlers, one tie per zone: the sensors cannot tell a zone's
+# two apart, and the benchmark counts either as found
+UNWIND_ZONE = ("idler_u1", "roller9")
+REWIND_ZONE = ("idler_r1", "roller19")
+
+
 def independent_cases(root, seed, ids, timeout=1200):
     """Cases ``ids`` of the independent benchmark's draw for ``seed``, diagnosed blind
     in a subprocess (one job) in ``root``: {id: the benchmark's result dict}."""

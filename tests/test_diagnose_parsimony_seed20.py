@@ -23,11 +23,9 @@ the gap's periodic part, the part a rotating source can explain, they carry 7.0 
 """
 import pytest
 
-from records import assert_no_sensor_worse, independent_cases
+from records import REWIND_ZONE, UNWIND_ZONE, assert_no_sensor_worse, independent_cases
 
 SEED = 20
-UNWIND_ZONE = ("idler_u1", "roller9")   # one tie each: equal radii, one zone
-REWIND_ZONE = ("idler_r1", "roller19")
 
 
 @pytest.fixture(scope="module")

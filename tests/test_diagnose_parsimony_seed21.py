@@ -17,11 +17,9 @@ roller9, whose form fits lc9 worse without it, stays: test_diagnose_parsimony_se
 """
 import pytest
 
-from records import assert_no_sensor_worse, independent_cases
+from records import REWIND_ZONE, UNWIND_ZONE, assert_no_sensor_worse, independent_cases
 
 SEED = 21
-UNWIND_ZONE = ("idler_u1", "roller9")   # one tie each: equal radii, one zone
-REWIND_ZONE = ("idler_r1", "roller19")
 
 
 @pytest.fixture(scope="module")

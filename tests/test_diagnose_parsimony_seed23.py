@@ -14,11 +14,9 @@ part as large were recovered 82-99 % (unit rows in test_diagnose_phantom).
 """
 import pytest
 
-from records import assert_no_sensor_worse, independent_cases
+from records import REWIND_ZONE, UNWIND_ZONE, assert_no_sensor_worse, independent_cases
 
 SEED = 23
-UNWIND_ZONE = ("idler_u1", "roller9")   # one tie each: equal radii, one zone
-REWIND_ZONE = ("idler_r1", "roller19")
 
 
 @pytest.fixture(scope="module")

@@ -15,13 +15,12 @@ Built and scored by the independent benchmark's own code (truth: monolithic
 fast engine, a 10 s record at 250 Hz; diagnosis run blind in a subprocess).
 """
 import pytest
-from records import assert_no_sensor_worse
+from records import REWIND_ZONE, assert_no_sensor_worse
 
 from webline.diagnosis import benchmark as B
 from webline.diagnosis import benchmark_independent as BI
 
 MM = 1e-3
-REWIND_ZONE = ("idler_r1", "roller19")
 
 
 @pytest.fixture(scope="module")
