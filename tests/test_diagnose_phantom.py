@@ -94,7 +94,7 @@ def test_parsimony_rule_on_numbers():
 
 
 def test_parsimony_weighs_a_secondary_source_against_the_noise_floor():
-    from webline.diagnosis.structure import CLOSES, parsimony_rule
+    from webline.diagnosis.structure import CLOSES, RECOVER_MIN, parsimony_rule
     # independent c07 (phantom roller9 beside an eccentric roller19; the truth feeds forward
     # nothing): lc9 recovers 97 %, lc19 only 78 % - but roller9 takes lc19 from 0.0836 to
     # 0.0728 where its noise allows 0.0514: 39 % of the gap, a transfer error absorbed
@@ -121,7 +121,6 @@ def test_parsimony_weighs_a_secondary_source_against_the_noise_floor():
     # seed-23 c05 (roller9 real, 83 um beside idler_r1's 200 um at one frequency): it takes 43 % of
     # lc9's NRMSE^2, closes 22 % of the gap there, and 'feedforward none + load-cell filter order 2'
     # without it recovers 69 %: kept (dropped while RECOVER_MIN was 0.5)
-    from webline.diagnosis.structure import RECOVER_MIN
     full, wo, form = {"lc9.T": 0.8388, "lc19.T": 0.4687}, {"lc9.T": 1.065, "lc19.T": 0.4724}, \
         {"lc9.T": 0.914, "lc19.T": 0.474}
     rows, why = parsimony_rule(full, wo, form, floor={"lc9.T": 0.4921, "lc19.T": 0.2894})
