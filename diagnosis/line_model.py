@@ -89,6 +89,7 @@ class LineModel:
         self.n_sims = 0
         self.sim_wall = 0.0
         self._tmp = None
+        self._written = {}   # derived layout text -> its temporary file
         self.jobs = max(1, int(jobs))
         self._pool = None
 
@@ -128,15 +129,19 @@ class LineModel:
         """Write a derived layout; to a temporary file unless ``path`` is given
         (then its ``base`` is made relative to the file's folder)."""
         from webline.diagnosis import layout_edit
-        if path is None:
-            if self._tmp is None:
-                self._tmp = tempfile.TemporaryDirectory(prefix="webline_diagnose_")
-            self._n_tmp = getattr(self, "_n_tmp", 0) + 1
-            path = Path(self._tmp.name) / f"layout_{self._n_tmp}.yaml"
-        else:
+        if path is not None:
             doc = layout_edit.relative_to(doc, Path(path).parent)
         text = ("# written by webline diagnose: the layout named in 'base' plus what the diagnosis added\n"
                 + yaml.safe_dump(doc, sort_keys=False, allow_unicode=True))
+        if path is None:
+            # one file per distinct document: a variant is simulated once per run, and an
+            # unchanged file is parsed once (orchestrator.layout_source's cache)
+            written = self._written
+            if text in written:
+                return written[text]
+            if self._tmp is None:
+                self._tmp = tempfile.TemporaryDirectory(prefix="webline_diagnose_")
+            path = written[text] = Path(self._tmp.name) / f"layout_{len(written) + 1}.yaml"
         Path(path).write_text(text)
         return Path(path)
 
@@ -144,6 +149,7 @@ class LineModel:
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
+            self._written = {}
         if getattr(self, "_pool", None) is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
