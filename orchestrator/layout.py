@@ -965,6 +965,7 @@ def _unit_text(value):
     return unit or None
 
 
+@functools.lru_cache(maxsize=1024)
 def _is_force(unit):
     try:
         return parse(f"1 {unit}").check("[force]")

@@ -8,6 +8,7 @@ bigger than its core, a load cell inside its tension zone) are checked by
 docs/layout.md describes the format; docs/layout.schema.json is generated
 from these models (``webline validate --schema``).
 """
+import functools
 import math
 import re
 from typing import Annotated, Any, Literal, Optional, Union
@@ -76,6 +77,7 @@ def Q(dimension, *, gt=None, ge=None, le=None, unit_required=False, note=""):
     return Annotated[float, BeforeValidator(validate), WithJsonSchema(schema)]
 
 
+@functools.lru_cache(maxsize=4096)   # the same strings in every layout a diagnosis builds
 def _unitless(text):
     try:
         return parse(text).unitless

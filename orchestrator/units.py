@@ -165,11 +165,13 @@ def convert(value_si, unit):
     return value_si / float(u.to_base_units().magnitude)
 
 
+@functools.lru_cache(maxsize=1024)   # unit strings repeat in every layout a diagnosis builds
 def si_factor(unit):
     """SI value of one ``unit`` (``si_factor("lbf") == 4.448...``)."""
     return float(parse(f"1 {unit}").to_base_units().magnitude)
 
 
+@functools.lru_cache(maxsize=1024)
 def dimension_of(unit):
     """Name in :data:`DIMENSIONS` of the first dimension ``unit`` matches, or None."""
     d = parse(f"1 {unit}").dimensionality
