@@ -147,16 +147,24 @@ class RunCtx:
 
 # ================================================================ the pipeline ====
 
+APART = 0.25   # lines closer than this many segment resolutions (1/T_seg) share a segment's phasor
+
+
 def _apart(c, th, orders, beside, segs, T_seg):
     """Per order of the family on angle ``th``: True where, on every segment of
-    ``segs``, its line lies at least one segment resolution (1/T_seg) from every line
-    of the families already taken (``beside``: (angle, orders)). Two lines closer
-    than that share a segment's phasor however they are fitted, and as a roll's
-    radius changes one beats through the other from segment to segment (independent
-    seed-24 c17: the rewind, 3 in at the start, turns its order 2 onto roller9's
-    1.5 in order 1 in the first steady window; the out-of-round rewind's order 2 read
-    0.12-0.33 there, 0.9-1.1 in the two others; with roller9 taken, its coherence was
-    0.71 in all, under the 0.75 asked, and 0.94 with those orders set aside)."""
+    ``segs``, its line lies at least :data:`APART` segment resolutions (1/T_seg) from
+    every line of the families already taken (``beside``: (angle, orders)). Two
+    tones df apart correlate over a segment by |sinc(df T_seg)|: 0.90 at a quarter of
+    a resolution, where the joint fit's variance is inflated five times, so the two
+    share a segment's phasor however they are fitted; as a roll's radius changes one
+    beats through the other from segment to segment (independent seed-24 c17: the
+    rewind, 3 in at the start, turns its order 2 onto roller9's 1.5 in order 1, 0.04
+    resolutions apart on the first segment of the first steady window; that order
+    read 0.12-0.33 there, 0.9-1.1 in the two other windows; with roller9 taken, the
+    rewind's coherence was 0.71 in all, under the 0.75 asked). Farther apart the
+    joint fit separates them (seed-24 c05: roller9's order 1 0.65 resolutions from
+    the S-wrap leader's order 4 on every segment; coherence 0.997 fitted jointly,
+    0.28 with that order set aside and its other orders noise)."""
     free = np.ones(len(orders), bool)
     if not beside:
         return free
@@ -167,7 +175,7 @@ def _apart(c, th, orders, beside, segs, T_seg):
         for tb, ob in beside:
             fb = abs(tb[g[-1]] - tb[g[0]]) / (2 * math.pi * dt)
             gap = np.min(np.abs(oj[:, None] * f - np.asarray(ob, float)[None, :] * fb), axis=1)
-            free &= gap >= 1.0 / T_seg
+            free &= gap * T_seg >= APART
     return free
 
 class Diagnosis:

@@ -1,7 +1,8 @@
 """A family's coherence sets aside the orders it cannot tell from a family already taken.
 
-A family's line within one segment resolution (1/T_seg) of a taken family's line
-shares each segment's phasor with it; as a roll's radius changes the two beat from
+A family's line within a quarter of a segment resolution (1/T_seg) of a taken
+family's line shares each segment's phasor with it (the two bases correlate above
+0.9); as a roll's radius changes the two beat from
 segment to segment and the order reads incoherent whatever the source is
 (independent seed-24 c17: the out-of-round rewind, 3 in at the start, turns its
 order 2 onto roller9's 1.5 in order 1). The arithmetic below is exact: frequencies
@@ -30,6 +31,21 @@ def test_orders_on_a_taken_familys_lines_are_set_aside():
     free = P._apart(c, th, [1, 2, 3, 4, 5, 6], [(tb, [1, 2, 3, 4, 5, 6])], segs, 15.0 / 4)
     # even orders sit on the roller's lines; odd ones 2.6 Hz away, ten resolutions
     assert free.tolist() == [True, False, True, False, True, False]
+
+
+def test_lines_the_joint_fit_separates_are_kept():
+    # seed-24 c05: roller9's order 1 at 4.033 x the S-wrap leader's speed beside the
+    # leader's order 4: 0.65 resolutions apart over 15 s segments (correlation 0.44),
+    # which a joint fit separates; a quarter of a resolution (correlation 0.90) is not
+    t = np.arange(0.0, 60.0, 1 / FS)
+    f_sw = 1.294
+    segs = _segments(t)
+    c = SimpleNamespace(t=t)
+    roller = 2 * math.pi * 4.0333 * f_sw * t
+    leader = 2 * math.pi * f_sw * t
+    assert P._apart(c, roller, [1], [(leader, [1, 2, 3, 4, 5, 6])], segs, 15.0).tolist() == [True]
+    near = 2 * math.pi * (4 * f_sw + 0.2 / 15.0) * t
+    assert P._apart(c, near, [1], [(leader, [1, 2, 3, 4, 5, 6])], segs, 15.0).tolist() == [False]
 
 
 def test_nothing_taken_nothing_set_aside():
