@@ -8,8 +8,9 @@ The rewind starts at 3 in, twice roller9's radius, so in the first steady window
 order 2 sits on roller9's order 1 and slides off as the roll grows. roller9 is taken
 first; the rewind's coherence, with roller9 fitted beside it segment by segment,
 read 0.71 (0.75 asked) because its order 2 read 0.12-0.33 in that window and
-0.9-1.1 in the two others. Orders within one segment resolution of a taken
-family's line are now set aside (``pipeline._apart``): 0.94, and the rewind is taken.
+0.9-1.1 in the two others. Orders within a quarter of a segment resolution of a
+taken family's line are now set aside (``pipeline._apart``): 0.94, and the rewind is
+taken.
 """
 import pytest
 
