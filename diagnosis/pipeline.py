@@ -178,6 +178,7 @@ def _apart(c, th, orders, beside, segs, T_seg):
             free &= gap * T_seg >= APART
     return free
 
+
 class Diagnosis:
     def __init__(self, layout, runs, holdout=(), out=None, options=None):
         self.layout_path = Path(layout)
@@ -538,7 +539,7 @@ class Diagnosis:
                 den += float(np.sum(w[free]))
         if den_all == 0.0:
             return 1.0
-        # an order that no segment tells apart from a family already taken says nothing of
+        # an order that some segment cannot tell from a taken family's line says nothing of
         # this one's steadiness; if every order is such, all of them count (never a free pass)
         return num / den if den > 0 else num_all / den_all
 
