@@ -67,8 +67,8 @@ def test_a_line_that_drifts_onto_another_in_one_segment_is_set_aside():
     assert P._apart(SimpleNamespace(t=t), th, [1], [(tb, [1])], segs, 15.0 / 4).tolist() == [False]
 
 
-def _coherence(orders, beside, resid, Y):
-    """Diagnosis._coherence on one run and one sensor with a white floor of zero."""
+def _one_sensor(resid, Y):
+    """(self, run, residuals, fit) for Diagnosis._coherence: one run, one sensor, a white floor of zero."""
     t = np.arange(len(resid)) / FS
     c = SimpleNamespace(t=t, fs=FS, mask=np.ones(len(t), bool), sensors=["lc.T"], floors={})
     me = SimpleNamespace(_mask_pieces=P.Diagnosis._mask_pieces)
@@ -83,12 +83,12 @@ def test_coherence_counts_the_free_orders_and_never_gives_a_free_pass():
     # order 1 steady; order 2 a line whose phase jumps segment by segment (as two beating lines read)
     jumps = np.repeat(rng.uniform(0, 2 * math.pi, 4), len(t) // 4 + 1)[:len(t)]
     y = np.cos(th) + np.cos(2 * th + jumps)
-    me, c, resid, fit = _coherence([1, 2], [(tb, [1])], y, [1.0, 1.0])
+    me, c, resid, fit = _one_sensor(y, [1.0, 1.0])
     with_beside = P.Diagnosis._coherence(me, c, "k", resid, th, [1, 2], fit, beside=[(tb, [1])])
     alone = P.Diagnosis._coherence(me, c, "k", resid, th, [1, 2], fit, beside=[])
     assert with_beside > 0.99                  # order 2 set aside: order 1's steady line
     assert alone < 0.8                          # nothing taken: the jumping order counts
     # every order on a taken line: all of them count, as before
-    me, c, resid, fit = _coherence([2], [(tb, [1])], np.cos(2 * th + jumps), [1.0])
+    me, c, resid, fit = _one_sensor(np.cos(2 * th + jumps), [1.0])
     every = P.Diagnosis._coherence(me, c, "k", resid, th, [2], fit, beside=[(tb, [1])])
     assert every < 0.8
