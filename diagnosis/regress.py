@@ -39,6 +39,9 @@ log = logging.getLogger("webline.diagnose")
 PAIR_GAIN = 0.5      # share of the excess residual (above noise) a second same-frequency source must remove
 PAIR_BLOWUP = 3.0    # joint amplitudes beyond this multiple of the single fits: the pair is degenerate
 MAX_RANKED = 4       # candidates of one effect regressed (best harmonic pattern fits first)
+GAIN_MIN = 0.01      # a Gauss-Newton step that lowers the simulated residual by less ends the iteration
+LINEAR = 0.1         # a whole step whose simulated residual lands within this share of the predicted
+#                      fall of it keeps its responses for the next step
 
 
 def _doc(d, base, cands, Xs):
@@ -195,7 +198,11 @@ def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="ti
     layout ``base`` on the fit runs ``ctxs``: first the orders that make the simulated
     residual larger are dropped (``drop_rounds``), then per step the responses at the
     current estimate, a least-squares step, quartered (up to twice) until the simulated
-    residual falls. ``last``: a dict that receives the latest responses (``resp``, ``cols``).
+    residual falls. A whole step whose simulated residual fell as its responses predicted
+    (within :data:`LINEAR`) keeps them for the next step: the line was linear over it, and
+    the next step then costs one simulation per run, or none when those responses promise
+    less than :data:`GAIN_MIN` (a reused step that fails gets fresh responses and is tried
+    again). ``last``: a dict that receives the latest responses (``resp``, ``cols``).
 
     Returns (Xs, sims, sse, history); the input estimate if no step helps."""
     H = d.opt.harmonics
@@ -207,32 +214,46 @@ def gauss_newton(d, base, cands, Xs, orders, ctxs, steps=3, sims=None, label="ti
     e = sse(d, ctxs, sims)
     hist = [e]
     Xs, sims, e = drop_harmful_orders(d, base, cands, Xs, ctxs, sims, e, label, rounds=drop_rounds)
+    resp = None
     for it in range(steps):
-        resp, cols = responses(d, base, cands, Xs, orders, ctxs, sims, label=f"{label} {it + 1}")
-        if resp is None:
-            break
-        if last is not None:   # the latest regressors: the estimate's standard errors
-            last["resp"], last["cols"] = resp, cols
-        coef, _, e_pred = solve(d, ctxs, resp, cols, sims)
-        dX = to_X(coef, cols, len(cands), H)
-        lam, accepted = 1.0, False
-        for _ in range(3):
-            Xn = [X + lam * dx for X, dx in zip(Xs, dX)]
-            sn = simulate(d, _doc(d, base, cands, Xn), ctxs, f"{label} {it + 1} step {lam:g}")
-            if sn is not None:
-                en = sse(d, ctxs, sn)
-                if en < e:
-                    Xs, sims, accepted = Xn, sn, True
-                    break
-            lam *= 0.25
+        for _ in range(2):
+            fresh = resp is None
+            if fresh:
+                resp, cols = responses(d, base, cands, Xs, orders, ctxs, sims, label=f"{label} {it + 1}")
+                if resp is None:
+                    return Xs, sims, e, hist
+                if last is not None:   # the latest regressors: the estimate's standard errors
+                    last["resp"], last["cols"] = resp, cols
+            coef, _, e_pred = solve(d, ctxs, resp, cols, sims)
+            if not fresh and e - e_pred < GAIN_MIN * e:
+                # responses the last step proved linear promise less than a step must bring
+                return Xs, sims, e, hist
+            dX = to_X(coef, cols, len(cands), H)
+            lam, accepted = 1.0, False
+            for _ in range(3):
+                Xn = [X + lam * dx for X, dx in zip(Xs, dX)]
+                sn = simulate(d, _doc(d, base, cands, Xn), ctxs, f"{label} {it + 1} step {lam:g}")
+                if sn is not None:
+                    en = sse(d, ctxs, sn)
+                    if en < e:
+                        accepted = True
+                        break
+                lam *= 0.25
+            if accepted or fresh:
+                break
+            resp = None   # reused responses misled the step: fresh ones at this estimate
         if not accepted:
             break
-        log.info("  %s %d: periodic residual %.4g -> %.4g (predicted %.4g, step %g)", label, it + 1,
-                 e, en, e_pred, lam)
+        log.info("  %s %d: periodic residual %.4g -> %.4g (predicted %.4g, step %g%s)", label, it + 1,
+                 e, en, e_pred, lam, "" if fresh else ", responses reused")
+        # a whole step that fell as the responses predicted: the line is linear over it and
+        # the same responses serve the next step (each costs 2 x orders x runs simulations)
+        if not (lam == 1.0 and abs(en - e_pred) <= LINEAR * (e - e_pred)):
+            resp = None
         gain = (e - en) / e if e > 0 else 0.0
-        e = en
+        Xs, sims, e = Xn, sn, en
         hist.append(e)
-        if gain < 0.01:
+        if gain < GAIN_MIN:
             break
     return Xs, sims, e, hist
 
