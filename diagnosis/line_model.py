@@ -20,6 +20,7 @@ import copy
 import logging
 import tempfile
 import time as _time
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +48,7 @@ class RunColumns(Mapping):
         v = self._done.get(k)
         if v is None:
             v = self._done[k] = np.interp(self._t_run, self._t, self._raw[k])  # run time is model time
+            v.flags.writeable = False   # one Sim may serve several callers (LineModel.simulate_many)
         return v
 
     def __contains__(self, k):
@@ -90,6 +92,11 @@ class LineModel:
         self.sim_wall = 0.0
         self._tmp = None
         self._written = {}   # derived layout text -> its temporary file
+        # (run conditions, layout file) -> the Sim still held by some caller: the diagnosis's
+        # stages ask again for simulations they or another stage made (the nominal under each
+        # run, a form's estimate, the refined layout), about one in seven of them
+        self._memo = weakref.WeakValueDictionary()
+        self.n_reused = 0
         self.jobs = max(1, int(jobs))
         self._pool = None
 
@@ -236,14 +243,50 @@ class LineModel:
                     out[k] = exc
         return out
 
+    def _memo_key(self, run, doc):
+        """What a simulation depends on: the run's conditions and grid, and the layout
+        file :meth:`system` would load (one file per distinct derived layout)."""
+        layout = None if doc is None or not doc.get("set") else str(self.write_doc(doc))
+        t = np.asarray(run.t, float)
+        return (run.name, repr(sorted((run.overrides or {}).items())), float(t[-1]),
+                float(t[1] - t[0]) if t.size > 1 else 0.0, layout)
+
     def simulate_many(self, jobs):
         """Simulate ``jobs`` = [(run, doc, label)]; returns [Sim] in order (or the
         exception raised by a job in its place, for the caller to handle).
 
-        With ``self.jobs`` > 1 the simulations run in worker processes (spawned:
-        every worker loads its own FMU instances; pythonfmu's module names are
-        process-global), the pool kept for the whole diagnosis."""
+        A job whose run conditions and layout match a simulation some caller still
+        holds gets that Sim (the engines are deterministic; its columns are read-only),
+        as does a job repeated in one call. With ``self.jobs`` > 1 the simulations run
+        in worker processes (spawned: every worker loads its own FMU instances;
+        pythonfmu's module names are process-global), the pool kept for the whole
+        diagnosis."""
         jobs = list(jobs)
+        keys = [self._memo_key(run, doc) for run, doc, _ in jobs]
+        out, first, todo = [None] * len(jobs), {}, []
+        for k, key in enumerate(keys):
+            if key in first:
+                continue
+            hit = self._memo.get(key)
+            if hit is not None:
+                out[k] = hit
+                continue
+            first[key] = k
+            todo.append(k)
+        for k, sim in zip(todo, self._simulate_many_uncached([jobs[k] for k in todo])):
+            out[k] = sim
+            if isinstance(sim, Sim):
+                self._memo[keys[k]] = sim
+        fresh = set(todo)
+        for k, key in enumerate(keys):
+            if out[k] is None:
+                out[k] = out[first[key]]
+            if k not in fresh:
+                self.n_reused += 1
+                log.debug("  reused a simulation of %s (%s)", jobs[k][0].name, jobs[k][2])
+        return out
+
+    def _simulate_many_uncached(self, jobs):
         if self.engine == "fast":
             return self._simulate_many_fast(jobs)
         if self.jobs <= 1 or len(jobs) < 2:
@@ -276,7 +319,7 @@ class LineModel:
                 self._pool = None
                 self.jobs = 1
                 done = len(out)
-                return out + self.simulate_many(jobs[done:])
+                return out + self._simulate_many_uncached(jobs[done:])
             self.n_sims += 1
             self.sim_wall += sim.wall
             log.info("  simulated %s%s: %.3g s of line in %.1f s (co-simulation worker)", run.name,

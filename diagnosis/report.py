@@ -35,7 +35,8 @@ def build(d):
                       "other": getattr(d, "other_log", [])},
         "notes": list(d.notes),
         "timings_s": d.timings,
-        "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall},
+        "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall,
+                        "reused": getattr(d.model, "n_reused", 0)},
     }
     from webline.diagnosis import claims, compliance, ripple
     fit = [c for c in d.ctx if c.fit]
