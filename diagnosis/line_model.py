@@ -109,14 +109,15 @@ class LineModel:
         return self._fmu_paths
 
     # ---------------------------------------------------------------- systems ----
-    def system(self, run, doc=None, edits=()):
-        """System of the layout (or of the derived layout ``doc``) under ``run``'s conditions."""
+    def system(self, run, doc=None, edits=(), written=None):
+        """System of the layout (or of the derived layout ``doc``) under ``run``'s conditions;
+        ``written``: the file :meth:`write_doc` already gave for ``doc``."""
         from webline.orchestrator.layout import load_system
         overrides = dict(run.overrides) if run is not None else {}
         if doc is None or not doc.get("set"):
             system = load_system(self.path, overrides or None)
         else:
-            system = load_system(self.write_doc(doc), overrides or None)
+            system = load_system(written or self.write_doc(doc), overrides or None)
         if run is not None:
             e = system.experiment
             if not any(k in overrides for k in ("experiment.duration", "experiment.stop")):
@@ -201,8 +202,9 @@ class LineModel:
         result = simulate(system, fmu_paths=self.fmu_paths, progress=self.progress)
         return self._finish(run, system, result, _time.perf_counter() - t0, label, "co-simulation")
 
-    def _simulate_many_fast(self, jobs):
-        """Fast engine: jobs whose systems share structure and output times run as one batch."""
+    def _simulate_many_fast(self, jobs, written=None):
+        """Fast engine: jobs whose systems share structure and output times run as one batch;
+        ``written``: per job, the derived layout's file if already written."""
         from webline.orchestrator import engine
         from webline.orchestrator.reference import output_times
         out = [None] * len(jobs)
@@ -210,7 +212,7 @@ class LineModel:
         systems = []
         for k, (run, doc, label) in enumerate(jobs):
             try:
-                system = self.system(run, doc)
+                system = self.system(run, doc, written=written[k] if written else None)
                 compiled = engine.compile_system(system)
                 # a batch shares its held noise sources (load cells, drive ripple): they are in the key
                 key = (compiled.structure, tuple(output_times(system.experiment)), float(system.experiment.start),
@@ -246,7 +248,7 @@ class LineModel:
     def _memo_key(self, run, doc):
         """What a simulation depends on: the run's conditions and grid, and the layout
         file :meth:`system` would load (one file per distinct derived layout)."""
-        layout = None if doc is None or not doc.get("set") else str(self.write_doc(doc))
+        layout = None if doc is None or not doc.get("set") else self.write_doc(doc)
         t = np.asarray(run.t, float)
         return (run.name, repr(sorted((run.overrides or {}).items())), float(t[-1]),
                 float(t[1] - t[0]) if t.size > 1 else 0.0, layout)
@@ -273,7 +275,8 @@ class LineModel:
                 continue
             first[key] = k
             todo.append(k)
-        for k, sim in zip(todo, self._simulate_many_uncached([jobs[k] for k in todo])):
+        # the key's layout file serves the simulation too (writing it dumps the document)
+        for k, sim in zip(todo, self._simulate_many_uncached([jobs[k] for k in todo], [keys[k][-1] for k in todo])):
             out[k] = sim
             if isinstance(sim, Sim):
                 self._memo[keys[k]] = sim
@@ -286,9 +289,9 @@ class LineModel:
                 log.debug("  reused a simulation of %s (%s)", jobs[k][0].name, jobs[k][2])
         return out
 
-    def _simulate_many_uncached(self, jobs):
+    def _simulate_many_uncached(self, jobs, written=None):
         if self.engine == "fast":
-            return self._simulate_many_fast(jobs)
+            return self._simulate_many_fast(jobs, written)
         if self.jobs <= 1 or len(jobs) < 2:
             out = []
             for run, doc, label in jobs:

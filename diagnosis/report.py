@@ -36,7 +36,7 @@ def build(d):
         "notes": list(d.notes),
         "timings_s": d.timings,
         "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall,
-                        "reused": getattr(d.model, "n_reused", 0)},
+                        "reused": d.model.n_reused},
     }
     from webline.diagnosis import claims, compliance, ripple
     fit = [c for c in d.ctx if c.fit]

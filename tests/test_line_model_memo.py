@@ -19,7 +19,7 @@ def _model():
     model = LineModel(LAYOUT)
     asked = []
 
-    def uncached(jobs):
+    def uncached(jobs, written=None):
         asked.extend(label for _, _, label in jobs)
         t = np.linspace(0.0, 1.0, 11)
         return [Sim(None, RunColumns(t, {"lc.T": t * (k + 1)}, t)) for k, _ in enumerate(jobs)]
