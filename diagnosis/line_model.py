@@ -16,6 +16,7 @@ Edits come in two forms: ``doc`` edits change the layout document itself
 (what ``refined_layout.yaml`` holds) and ``system`` edits are callables on the
 built System (screening only).
 """
+import collections
 import copy
 import logging
 import tempfile
@@ -66,6 +67,7 @@ class Sim:
     system: object
     columns: dict          # column -> array on the run's time grid
     wall: float = 0.0
+    key: tuple = None      # LineModel's memo key: what the simulation depends on
 
     def __getitem__(self, k):
         return self.columns[k]
@@ -97,6 +99,9 @@ class LineModel:
         # run, a form's estimate, the refined layout), about one in seven of them
         self._memo = weakref.WeakValueDictionary()
         self.n_reused = 0
+        # small results derived from simulations (a probe's PSDs), kept after the Sims are
+        # released: a Sim is ~20 MB, what is derived from it a few kB (:meth:`derived`)
+        self._derived = collections.OrderedDict()
         self.jobs = max(1, int(jobs))
         self._pool = None
 
@@ -245,9 +250,9 @@ class LineModel:
                     out[k] = exc
         return out
 
-    def _memo_key(self, run, doc):
-        """What a simulation depends on: the run's conditions and grid, and the layout
-        file :meth:`system` would load (one file per distinct derived layout)."""
+    def memo_key(self, run, doc):
+        """What a simulation depends on (its ``Sim.key``): the run's conditions and grid,
+        and the layout file :meth:`system` would load (one file per distinct derived layout)."""
         layout = None if doc is None or not doc.get("set") else self.write_doc(doc)
         t = np.asarray(run.t, float)
         return (run.name, repr(sorted((run.overrides or {}).items())), float(t[-1]),
@@ -264,7 +269,7 @@ class LineModel:
         pythonfmu's module names are process-global), the pool kept for the whole
         diagnosis."""
         jobs = list(jobs)
-        keys = [self._memo_key(run, doc) for run, doc, _ in jobs]
+        keys = [self.memo_key(run, doc) for run, doc, _ in jobs]
         out, first, todo = [None] * len(jobs), {}, []
         for k, key in enumerate(keys):
             if key in first:
@@ -279,6 +284,7 @@ class LineModel:
         for k, sim in zip(todo, self._simulate_many_uncached([jobs[k] for k in todo], [keys[k][-1] for k in todo])):
             out[k] = sim
             if isinstance(sim, Sim):
+                sim.key = keys[k]
                 self._memo[keys[k]] = sim
         fresh = set(todo)
         for k, key in enumerate(keys):
@@ -288,6 +294,22 @@ class LineModel:
                 self.n_reused += 1
                 log.debug("  reused a simulation of %s (%s)", jobs[k][0].name, jobs[k][2])
         return out
+
+    DERIVED_MAX = 512   # entries kept by :meth:`derived` (least recently used dropped)
+
+    def derived(self, key):
+        """What :meth:`keep` stored for ``key`` (None if nothing): results derived from
+        deterministic simulations whose keys (``Sim.key``) are part of ``key``."""
+        value = self._derived.get(key)
+        if value is not None:
+            self._derived.move_to_end(key)
+        return value
+
+    def keep(self, key, value):
+        self._derived[key] = value
+        self._derived.move_to_end(key)
+        while len(self._derived) > self.DERIVED_MAX:
+            self._derived.popitem(last=False)
 
     def _simulate_many_uncached(self, jobs, written=None):
         if self.engine == "fast":

@@ -20,6 +20,7 @@ unexplained resonance.
 Densities are one-sided, N.m/sqrt(Hz): a white ripple of rms sigma held over
 steps dt has 2 sigma^2 dt, whatever the sample rate.
 """
+import hashlib
 import logging
 import math
 
@@ -77,28 +78,57 @@ def probe_doc(doc, element, dt):
     return layout_edit.with_set(doc, f"drives.speed_loops.{element}.noise_seed", SEED)
 
 
+def _probe_key(d, c, pdoc, base, view):
+    """What a probe's PSDs depend on: the probe's and the base simulation's keys, the
+    view, the sensors and the samples read (None where the base has no key)."""
+    if base.key is None:
+        return None
+    mask = hashlib.sha1(np.packbits(np.asarray(c.mask, bool)).tobytes()).hexdigest()
+    return ("ripple probe", d.model.memo_key(c.run, pdoc), base.key, view.__name__, tuple(c.sensors),
+            float(c.fs), mask)
+
+
 def responses(d, doc, sims, view=None):
     """{run: {drive: {sensor: PSD per unit density^2}}} of the refined model (``doc``,
     its simulations ``sims`` by run) on every run, and {run: frequency grid} (runs
     may differ in sample rate). ``view`` (p, f) -> PSD: how the Welch PSD is
-    smoothed (default :func:`smooth`)."""
+    smoothed (default :func:`smooth`).
+
+    The PSDs (read-only) are kept by the line model (:meth:`LineModel.derived`): the
+    refined layout is probed by the ripple fit, the shaft screen's bands and its
+    hump, each after the others' simulations were released."""
     view = view or smooth
-    jobs, keys = [], []
+    probes, jobs = [], []
     for c in d.ctx:  # held-out runs too: the fit reads the residual's spectrum, no effect's estimate
-        dt = _hold_step(sims[c.name].system)
-        for el in drives(sims[c.name]):
-            jobs.append((c.run, probe_doc(doc, el, dt), f"ripple probe {el}"))
-            keys.append((c, el))
+        base = sims[c.name]
+        dt = _hold_step(base.system)
+        for el in drives(base):
+            pdoc = probe_doc(doc, el, dt)
+            key = _probe_key(d, c, pdoc, base, view)
+            hit = d.model.derived(key) if key is not None else None
+            probes.append((c, el, key, hit))
+            if hit is None:
+                jobs.append((c.run, pdoc, f"ripple probe {el}"))
+    fresh = iter(d.model.simulate_many(jobs))
     out, freqs = {}, {}
-    for (c, el), sim in zip(keys, d.model.simulate_many(jobs)):
-        if isinstance(sim, Exception):
-            log.info("  ripple probe of %s in %s failed: %s", el, c.name, (str(sim).splitlines() or [""])[0])
-            continue
-        per = out.setdefault(c.name, {}).setdefault(el, {})
-        for s in c.sensors:
-            f, p = welch((sim.columns[s] - sims[c.name].columns[s])[c.mask], c.fs)
-            per[s] = view(p, f) / PROBE_DENSITY ** 2
-            freqs[c.name] = f
+    for c, el, key, hit in probes:  # in the order of the drives: the fit's columns follow it
+        if hit is None:
+            sim = next(fresh)
+            if isinstance(sim, Exception):
+                log.info("  ripple probe of %s in %s failed: %s", el, c.name, (str(sim).splitlines() or [""])[0])
+                continue
+            per, f = {}, None
+            for s in c.sensors:
+                f, p = welch((sim.columns[s] - sims[c.name].columns[s])[c.mask], c.fs)
+                per[s] = view(p, f) / PROBE_DENSITY ** 2
+                per[s].setflags(write=False)
+            if f is None:
+                continue
+            f.setflags(write=False)
+            hit = (per, f)
+            if key is not None:
+                d.model.keep(key, hit)
+        out.setdefault(c.name, {})[el], freqs[c.name] = hit
     return out, freqs
 
 

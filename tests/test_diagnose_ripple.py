@@ -112,3 +112,38 @@ def test_a_layout_that_states_a_ripple_is_not_fitted_again():
     c.meas = {"lc9.T": sim.columns["lc9.T"]}
     d = SimpleNamespace(ctx=[c], model=model, refined_doc=doc, steps=[{"sims": {"a": sim}}])
     assert ripple.screen(d, {"a": {"lc9.T": {"psd_N2_per_hz": 1e-6}}}) == {}
+
+
+def test_probe_responses_are_kept_after_their_simulations_are_released():
+    """The shaft screen probes the refined layout again after the ripple fit released
+    its probes: the second ask is answered from what the line model kept, identical,
+    and another view or other samples read are probed afresh."""
+    import gc
+    fs, T = 250.0, 4.0
+    model = LineModel(EWL)
+    exp = {"experiment.duration": f"{T} s", "experiment.output_interval": f"{1 / fs} s"}
+    run = SimpleNamespace(name="a", overrides=exp, t=np.arange(0.0, T + 0.5 / fs, 1 / fs), holdout=False)
+    doc = {"base": str(EWL), "set": {"web.E": "2.3e8 Pa"}}
+    [sim] = model.simulate_many([(run, doc, "refined")])
+    c = RunCtx(run, True)
+    c.fs, c.sensors, c.mask = fs, ["lc9.T", "lc19.T"], run.t >= 1.0
+    d = SimpleNamespace(ctx=[c], model=model)
+    G1, f1 = ripple.responses(d, doc, {"a": sim}, view=ripple.fine)
+    probes = model.n_sims - 1
+    assert probes == len(ripple.drives(sim)) >= 3
+    gc.collect()   # the probes' simulations are gone
+    G2, f2 = ripple.responses(d, doc, {"a": sim}, view=ripple.fine)
+    assert model.n_sims == 1 + probes
+    assert list(G2["a"]) == list(G1["a"])   # the drives in the same order (the fit's columns)
+    for el in G1["a"]:
+        for s in c.sensors:
+            np.testing.assert_array_equal(G2["a"][el][s], G1["a"][el][s])
+    np.testing.assert_array_equal(f2["a"], f1["a"])
+    with pytest.raises(ValueError):
+        G2["a"]["unwind"]["lc9.T"][0] = 0.0     # kept arrays cannot be changed by a caller
+    ripple.responses(d, doc, {"a": sim})          # another view
+    assert model.n_sims == 1 + 2 * probes
+    c.mask = run.t >= 2.0                         # other samples
+    ripple.responses(d, doc, {"a": sim}, view=ripple.fine)
+    assert model.n_sims == 1 + 3 * probes
+    model.cleanup()
