@@ -387,6 +387,40 @@ def test_the_rigid_forms_a_shaft_must_beat_include_a_current_lag_in_every_drive(
     assert [n for n, _, _ in compliance.rigid_forms(None)] == ["web damping 2 ms"]
 
 
+def test_the_inertia_corners_move_one_drive_to_each_edge_of_the_data_sheet():
+    """A drive's inertia sets its speed loop's bandwidth: the best rigid form is tried
+    again with each drive's inertia at 1 -+ the data sheet's tolerance, the others as
+    the layout states them (where one fits a band within noise, no shaft is claimed)."""
+    from pathlib import Path
+    from types import SimpleNamespace
+    from webline.diagnosis import tolerances
+    from webline.diagnosis.line_model import LineModel
+    from webline.orchestrator.units import quantity
+    ewl = Path(__file__).resolve().parents[1] / "scenarios" / "ewl.yaml"
+    from webline.diagnosis import others
+    d = SimpleNamespace(model=LineModel(ewl))
+    plain = others._base(d)
+    base = {e["name"]: e for e in plain["path"]}
+    loops = sorted(plain["drives"]["speed_loops"])
+    w = tolerances.DATA_SHEET["inertia"]
+    ff = {"drives.speed_loops.unwind.feedforward": "reference"}
+    corners = compliance.inertia_corners(d, "feedforward reference", ff)
+    assert len(corners) == 2 * len(loops)
+    for (name, _, sets), (x, k) in zip(corners, [(x, k) for x in loops for k in (1 - w, 1 + w)]):
+        assert name == f"feedforward reference + {x} inertia x{k:g}"
+        extra = {key: v for key, v in sets.items() if key not in ff}
+        [(key, v)] = extra.items()   # one element changed, the form's keys kept
+        field = key.split(".")[-1]
+        assert key == f"path.{x}.{field}" and field in ("core_inertia", "inertia", "mass")
+        dim = {"core_inertia": "inertia", "inertia": "inertia", "mass": "mass"}[field]
+        assert float(quantity(v, dim)) == pytest.approx(k * float(quantity(base[x][field], dim)), rel=1e-5)
+    assert compliance.inertia_corners(d, None, {})[0][0] == f"as modelled + {loops[0]} inertia x{1 - w:g}"
+    # the best shaft's own drive alone
+    assert [n for n, _, _ in compliance.inertia_corners(d, None, {}, drives=["rewind"])] \
+        == [f"as modelled + rewind inertia x{1 - w:g}", f"as modelled + rewind inertia x{1 + w:g}"]
+    d.model.cleanup()
+
+
 def test_floors_under_fixed_levels_recover_the_floors_and_predict_exactly():
     """compliance._floors_under: with the drives' levels held at the ones that made the
     spectrum, the white and 1/f floors are recovered and the prediction is exact; held at
