@@ -344,12 +344,12 @@ def inertia_corners(d, name, sets, drives=None):
     loops = sorted((base.get("drives", {}) or {}).get("speed_loops", {}) or {})
     loops = [x for x in loops if drives is None or x in drives]
     w = tolerances.DATA_SHEET.get("inertia", 0.0)
+    label = "as modelled" if name is None else name
     out = []
     for x in loops:
         for k in (1.0 - w, 1.0 + w):
             extra = tolerances.scaled_set(base, inertia={x: k})
             if extra:
-                label = "as modelled" if name is None else name
                 out.append((f"{label} + {x} inertia x{k:g}", f"{x}'s inertia x{k:g}", {**sets, **extra}))
     return out
 
@@ -600,6 +600,11 @@ def other_runs(d, noise, hump, c, rigid_doc, rigid_levels, b):
     return out
 
 
+def _form_rows(fits):
+    """The record's view of rigid forms' fits (their layout keys left out)."""
+    return [{k: v for k, v in r.items() if k != "sets"} for r in fits]
+
+
 def _tried_rows(tried):
     """The record's view of the elements' best shafts."""
     return [{k: t[k] for k in ("element", "torsional_hz", "zeta", "misfit", "explained", "own_share", "form")}
@@ -653,7 +658,7 @@ def screen(d):
         # seed-7 c21: the truth's speed loops feed forward the set point; the rigid line in
         # 'feedforward none' fitted every band better than any shaft as modelled)
         rigid = _rigid_alternatives(d, noise, hump, c, cache)
-        rec["rigid"]["forms"] = [{k: v for k, v in r.items() if k != "sets"} for r in rigid]
+        rec["rigid"]["forms"] = _form_rows(rigid)
         rb = min(rigid, key=lambda r: r["misfit"]) if rigid else None
         in_form = rb is not None and rb["misfit"] < base[0]
         if in_form:
@@ -691,7 +696,7 @@ def screen(d):
         corners = _rigid_alternatives(d, noise, hump, c, cache,
                                       forms=inertia_corners(d, rb["form"] if in_form else None,
                                                             rb["sets"] if in_form else {}, drives=[b["element"]]))
-        rec["rigid"]["inertia_corners"] = [{k: v for k, v in r.items() if k != "sets"} for r in corners]
+        rec["rigid"]["inertia_corners"] = _form_rows(corners)
         cb = min(corners, key=lambda r: r["misfit"]) if corners else None
         if cb is not None and cb["misfit"] <= bound * fl:
             rec["why"] = (f"the rigid line in form '{cb['form']}' fits this band within noise "

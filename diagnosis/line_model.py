@@ -258,9 +258,10 @@ class LineModel:
         return (run.name, repr(sorted((run.overrides or {}).items())), float(t[-1]),
                 float(t[1] - t[0]) if t.size > 1 else 0.0, layout)
 
-    def simulate_many(self, jobs):
+    def simulate_many(self, jobs, keys=None):
         """Simulate ``jobs`` = [(run, doc, label)]; returns [Sim] in order (or the
-        exception raised by a job in its place, for the caller to handle).
+        exception raised by a job in its place, for the caller to handle). ``keys``:
+        the jobs' :meth:`memo_key`, when the caller has them already.
 
         A job whose run conditions and layout match a simulation some caller still
         holds gets that Sim (the engines are deterministic; its columns are read-only),
@@ -269,7 +270,8 @@ class LineModel:
         pythonfmu's module names are process-global), the pool kept for the whole
         diagnosis."""
         jobs = list(jobs)
-        keys = [self.memo_key(run, doc) for run, doc, _ in jobs]
+        # computing a key dumps the document: a caller that has them passes them
+        keys = list(keys) if keys is not None else [self.memo_key(run, doc) for run, doc, _ in jobs]
         out, first, todo = [None] * len(jobs), {}, []
         for k, key in enumerate(keys):
             if key in first:

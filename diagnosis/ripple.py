@@ -78,14 +78,9 @@ def probe_doc(doc, element, dt):
     return layout_edit.with_set(doc, f"drives.speed_loops.{element}.noise_seed", SEED)
 
 
-def _probe_key(d, c, pdoc, base, view):
-    """What a probe's PSDs depend on: the probe's and the base simulation's keys, the
-    view, the sensors and the samples read (None where the base has no key)."""
-    if base.key is None:
-        return None
-    mask = hashlib.sha1(np.packbits(np.asarray(c.mask, bool)).tobytes()).hexdigest()
-    return ("ripple probe", d.model.memo_key(c.run, pdoc), base.key, view.__name__, tuple(c.sensors),
-            float(c.fs), mask)
+def _samples_digest(c):
+    """Which samples of run ``c`` a probe's PSDs read (part of what they depend on)."""
+    return hashlib.sha1(np.packbits(np.asarray(c.mask, bool)).tobytes()).hexdigest()
 
 
 def responses(d, doc, sims, view=None):
@@ -98,18 +93,24 @@ def responses(d, doc, sims, view=None):
     refined layout is probed by the ripple fit, the shaft screen's bands and its
     hump, each after the others' simulations were released."""
     view = view or smooth
-    probes, jobs = [], []
+    probes, jobs, job_keys = [], [], []
     for c in d.ctx:  # held-out runs too: the fit reads the residual's spectrum, no effect's estimate
         base = sims[c.name]
         dt = _hold_step(base.system)
+        # the PSDs depend on the probe's and the base's simulations, the view, the samples read
+        # (a base without a key, simulated outside simulate_many, is not kept)
+        kept = None if base.key is None else (base.key, view.__name__, tuple(c.sensors), float(c.fs),
+                                                _samples_digest(c))
         for el in drives(base):
             pdoc = probe_doc(doc, el, dt)
-            key = _probe_key(d, c, pdoc, base, view)
+            sim_key = d.model.memo_key(c.run, pdoc)
+            key = None if kept is None else ("ripple probe", sim_key) + kept
             hit = d.model.derived(key) if key is not None else None
             probes.append((c, el, key, hit))
             if hit is None:
                 jobs.append((c.run, pdoc, f"ripple probe {el}"))
-    fresh = iter(d.model.simulate_many(jobs))
+                job_keys.append(sim_key)
+    fresh = iter(d.model.simulate_many(jobs, keys=job_keys))
     out, freqs = {}, {}
     for c, el, key, hit in probes:  # in the order of the drives: the fit's columns follow it
         if hit is None:
