@@ -690,9 +690,25 @@ def screen(d):
                 tried, pts = tried_f, pts_f
         rec["tried"] = _tried_rows(tried)
         b = tried[0]
+        gain = 1.0 - b["misfit"] / base[0] if base[0] > 0 else 0.0
+        if gain < MARGIN or (b["explained"] or 0.0) < ripple.EXPLAINED:
+            rec["why"] = (f"the best shaft ({b['element']}, {b['torsional_hz']:.3g} Hz) lowers the spectral "
+                          f"misfit by {100 * gain:.0f} % (needs {100 * MARGIN:.0f} %) and explains "
+                          f"{100 * (b['explained'] or 0.0):.0f} % of the hump (needs {100 * ripple.EXPLAINED:.0f} %)")
+            log.info("  no shaft claimed: %s", rec["why"])
+            continue
+        if b["own_share"] < OWN_MIN:
+            rec["why"] = (f"the best shaft ({b['element']}, {b['torsional_hz']:.3g} Hz) fits the band with the "
+                          f"other drives' ripple: its own drive carries {100 * b['own_share']:.0f} % of the ripple "
+                          f"fitted there (needs {100 * OWN_MIN:.0f} %); it reshapes the line, it is not rung")
+            d._reject(b["element"], "compliance", "shaft screen", None, reason=rec["why"],
+                      torsional_hz=b["torsional_hz"], own_share=b["own_share"])
+            log.info("  no shaft claimed: %s", rec["why"])
+            continue
         # nor where the shaft's own drive, its inertia at an edge of the data sheet, lets the
         # rigid line fit the band within noise: above its mode a shaft leaves the speed loop the
-        # motor's inertia alone, a lighter drive does that too (independent seed-26 c03)
+        # motor's inertia alone, a lighter drive does that too (independent seed-26 c03); after the
+        # refusals that cost no simulation
         corners = _rigid_alternatives(d, noise, hump, c, cache,
                                       forms=inertia_corners(d, rb["form"] if in_form else None,
                                                             rb["sets"] if in_form else {}, drives=[b["element"]]))
@@ -705,8 +721,7 @@ def screen(d):
                           f"within the data sheet's tolerance")
             log.info("  no shaft claimed: %s", rec["why"])
             continue
-        gain = 1.0 - b["misfit"] / base[0] if base[0] > 0 else 0.0
-        if hump.get("kind") == "spectral misfit" and gain >= MARGIN and (b["explained"] or 0.0) >= ripple.EXPLAINED:
+        if hump.get("kind") == "spectral misfit":
             an, med = _anomaly(d, noise, hump, base[0], bands, c, cache)
             rec["rigid"].update(anomaly=an, elsewhere_x_floor=None if med is None else med / fl)
             if an is not None and an < ANOMALY and med > ELSEWHERE_X * fl:
@@ -724,20 +739,6 @@ def screen(d):
                               f"{b['torsional_hz']:.3g} Hz) would lower it by {100 * gain:.0f} %")
                 log.info("  no shaft claimed: %s", rec["why"])
                 continue
-        if gain < MARGIN or (b["explained"] or 0.0) < ripple.EXPLAINED:
-            rec["why"] = (f"the best shaft ({b['element']}, {b['torsional_hz']:.3g} Hz) lowers the spectral "
-                          f"misfit by {100 * gain:.0f} % (needs {100 * MARGIN:.0f} %) and explains "
-                          f"{100 * (b['explained'] or 0.0):.0f} % of the hump (needs {100 * ripple.EXPLAINED:.0f} %)")
-            log.info("  no shaft claimed: %s", rec["why"])
-            continue
-        if b["own_share"] < OWN_MIN:
-            rec["why"] = (f"the best shaft ({b['element']}, {b['torsional_hz']:.3g} Hz) fits the band with the "
-                          f"other drives' ripple: its own drive carries {100 * b['own_share']:.0f} % of the ripple "
-                          f"fitted there (needs {100 * OWN_MIN:.0f} %); it reshapes the line, it is not rung")
-            d._reject(b["element"], "compliance", "shaft screen", None, reason=rec["why"],
-                      torsional_hz=b["torsional_hz"], own_share=b["own_share"])
-            log.info("  no shaft claimed: %s", rec["why"])
-            continue
         rec["other_runs"] = pred = other_runs(d, noise, hump, c, rigid_doc, base[2], b)
         bad = [r for r in pred if r["shaft"] > OTHER_X * max(r["rigid"], r["bound"])]
         if bad:
