@@ -446,3 +446,46 @@ def test_floors_under_fixed_levels_recover_the_floors_and_predict_exactly():
     _, R4 = compliance._floors_under(P, Gx, {"unwind": 16.0, "rewind": 2.0}, f, band)
     top = int(np.argmin(abs(f - 3.0)))
     assert R4["lc9.T"][top] > 2.0 * P["lc9.T"][top]
+
+
+def test_a_shaft_refused_beside_periodic_lines_is_placed_where_the_check_and_the_spectrum_accept_it(monkeypatch):
+    """line_placed: each mode of LINE_STEPS x the refused shaft's, the periodic effects
+    re-estimated with it; of the modes the NRMSE check passes, the one leaving the least
+    residual energy that still passes the spectral rule, never one the check refuses,
+    however little energy it leaves."""
+    from types import SimpleNamespace
+    from webline.diagnosis import backlash, regress
+    from webline.diagnosis import others as oth
+    f0 = 10.0
+    # per mode (ratio to f0): (residual energy, check passes, spectral misfit)
+    land = {0.8: (9.0, True, 0.5), 1.1: (4.0, True, 0.9), 1.2: (5.0, True, 0.5), 1.3: (3.0, False, 0.5)}
+    land = {round(q * f0, 6): v for q, v in land.items()}
+    land.update({round(q * f0, 6): (8.0, True, 0.5) for q in compliance.LINE_STEPS if round(q * f0, 6) not in land})
+    monkeypatch.setattr(oth, "_drive_doc", lambda doc, spec, ft, bl, zeta=0.05: {"ft": round(ft, 6)})
+    # the refined model as it stands ("now") and re-estimated without a shaft ("polished")
+    land.update({"now": (12.0, None, None), "polished": (10.0, None, None)})
+    monkeypatch.setattr(regress, "reestimate", lambda d, doc, label: (doc, {"ft": doc.get("ft", "polished")}, ["X"]))
+    monkeypatch.setattr(backlash, "_energy", lambda d, sims: land[sims["ft"]][0])
+    against = set()
+    monkeypatch.setattr(compliance, "_nrmse_check", lambda d, before, after, base, b: against.add(before["ft"]) or {
+        "accepted": land[after["ft"]][1], "nrmse_before": {"lc9.T": 1.0},
+        "nrmse_after": {"lc9.T": 1.0 if land[after["ft"]][1] else 1.01}})
+    tried = []
+    monkeypatch.setattr(compliance, "spectral_fit", lambda d, noise, doc, sims, hump: tried.append(doc["ft"]) or (
+        land[doc["ft"]][2], 0.9, {"sw_leader": 1.0}, {"sw_leader": 0.8}))
+    d = SimpleNamespace(steps=[{"sims": {"ft": "now"}}], refined_doc={})
+    b = {"element": "sw_leader", "torsional_hz": f0, "zeta": 0.05, "spec": ("sw_leader", 0.1, ("inertia", 0.1)),
+         "doc": {}, "misfit": 0.7}
+    base = (1.0, 0.5, {})   # the rigid line's misfit: a shaft must reach 0.75
+    p, rows = compliance.line_placed(d, {}, {"run": "run1"}, base, b)
+    # 13 Hz leaves the least energy but the check refuses it; 11 Hz fails the spectral rule
+    assert tried[:2] == [11.0, 12.0]
+    assert p["torsional_hz"] == pytest.approx(12.0) and p["new_X"] == ["X"] and p["misfit"] == 0.5
+    assert [r["torsional_hz"] for r in rows] == pytest.approx([q * f0 for q in compliance.LINE_STEPS])
+    assert not next(r for r in rows if r["torsional_hz"] == pytest.approx(13.0))["check"]
+    # judged against the polish without a shaft, which left less than the model as it stood
+    assert against == {"polished"}
+    # nothing the check passes meets the spectral rule: no shaft
+    land.update({k: (v[0], v[1], 0.9) for k, v in land.items() if not isinstance(k, str)})
+    p, rows = compliance.line_placed(d, {}, {"run": "run1"}, base, b)
+    assert p is None and len(rows) == len(compliance.LINE_STEPS)
