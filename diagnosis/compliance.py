@@ -457,7 +457,7 @@ def _scan(d, noise, hump, c, specs, doc0=None, form=None, sets=None):
     return tried, sorted(points.get(tried[0]["element"], []) if tried else [], key=lambda p: p["misfit"])
 
 
-def line_placed(d, noise, hump, base, b):
+def line_placed(d, noise, hump, base, b, memo=None):
     """The shaft ``b`` (refused by the check beside periodic sources) moved to a mode
     the sources' lines accept: a drive's ripple spectrum places a mode to a grid step,
     but a line passing near the mode is amplified by how near it is, and a shaft a
@@ -469,15 +469,21 @@ def line_placed(d, noise, hump, base, b):
     (:func:`_nrmse_check`, against the same re-estimate without a shaft where that
     is better: what the polish alone gains is no evidence) passes, the one leaving the least residual energy on the fit
     runs that still passes the spectral rule (:data:`MARGIN` over ``base``,
-    :data:`ripple.EXPLAINED`, :data:`OWN_MIN`). Returns (that shaft in the scan's shape
-    with ``sims``, ``new_X`` and ``check``, or None; a record of every step)."""
+    :data:`ripple.EXPLAINED`, :data:`OWN_MIN`). ``memo`` keeps the baseline while the
+    refined layout stands. Returns (that shaft in the scan's shape with ``sims``,
+    ``new_X``, ``check`` and ``at_end`` - the first or last mode tried -, or None; a
+    record of every step)."""
     from webline.diagnosis.backlash import _energy
     steps, rows = [], []
-    before = d.steps[-1]["sims"]
-    # against the same re-estimate without a shaft: what the polish alone gains is no evidence
-    got0 = regress.reestimate(d, d.refined_doc, "no shaft (lines)")
-    if got0 is not None and _energy(d, got0[1]) < _energy(d, before):
-        before = got0[1]
+    memo = {} if memo is None else memo
+    if memo.get("doc") is not d.refined_doc:
+        # against the same re-estimate without a shaft: what the polish alone gains is no evidence
+        before = d.steps[-1]["sims"]
+        got0 = regress.reestimate(d, d.refined_doc, "no shaft (lines)")
+        if got0 is not None and _energy(d, got0[1]) < _energy(d, before):
+            before = got0[1]
+        memo.update(doc=d.refined_doc, before=before)
+    before = memo["before"]
     for q in LINE_STEPS:
         ft = q * b["torsional_hz"]
         doc = others._drive_doc(copy.deepcopy(b["doc"]), b["spec"], ft, 0.0, zeta=b["zeta"])
@@ -502,6 +508,7 @@ def line_placed(d, noise, hump, base, b):
         row.update(misfit=p["misfit"], explained=p["explained"], own_share=p["own_share"])
         if p["misfit"] <= (1.0 - MARGIN) * base[0] and (p["explained"] or 0.0) >= ripple.EXPLAINED \
                 and p["own_share"] >= OWN_MIN:
+            p["at_end"] = ft in (steps[0][1], steps[-1][1])
             return p, rows
         log.info("  shaft of %s at %.3g Hz (placed by the lines) fails the spectral rule: misfit %.3g (rigid %.3g), "
                  "explains %s, own drive %.0f %%", b["element"], ft, p["misfit"], base[0],
@@ -585,7 +592,11 @@ def _effect(hump, rec, tried, base, chk):
                        "damping_ratio": {"estimated": zeta, "unit": "1"},
                        "motor_inertia": {"estimated": others.motor_inertia(spec), "unit": "kg*m^2"},
                        "ripple_density": {"estimated": b["levels"].get(b["element"]), "unit": "N*m/sqrt(Hz)"}},
-        "detail": (f"{b['element']} compliance, torsional mode {ft:.3g} Hz (from the residual's spectrum)"
+        "detail": (f"{b['element']} compliance, torsional mode {ft:.3g} Hz "
+                   + (f"(placed by the periodic sources' lines it amplifies; the residual's spectrum put it at "
+                      f"{b['spectral_hz']:.3g} Hz" + ("; the last mode tried, where the residual still fell: it "
+                                                       "may lie further out" if b.get("at_end") else "") + ")"
+                      if b.get("placed_by_lines") else "(from the residual's spectrum)")
                    + (f", the line in form '{form}'" if form else "")
                    + (f"; {runner['element']}'s shaft fits the band {100 * runner['worse']:.0f} % worse: "
                       f"one band's spectrum does not settle which drive" if runner and not runner["settled"] else "")),
@@ -687,7 +698,7 @@ def screen(d):
              if h["kind"] == "unexplained resonance" and h["frequency_hz"] >= F_MIN_HZ and h["run"] in fit_names]
     bands = missed_bands(d, noise)
     humps = humps[:MAX_HUMPS] + bands
-    cache = {}
+    cache, polished = {}, {}
     # a drive the other-effects screen gave a shaft or a dead zone already is not ideal any more
     taken = others.non_ideal_drives(d)
     specs = [sp for sp in others.drive_candidates(d) if sp[0] not in taken]
@@ -830,12 +841,12 @@ def screen(d):
                 b = tried[0] = p
                 break
         if not chk["accepted"] and d.final_effects:
-            p, rec["placed_by_lines"] = line_placed(d, noise, hump, base, tried[0])
+            p, rec["placed_by_lines"] = line_placed(d, noise, hump, base, tried[0], memo=polished)
             if p is not None:
                 sims_b, chk = p.pop("sims"), p.pop("check")
                 log.info("  check of %s's shaft at %.3g Hz (placed by the lines, periodic effects re-estimated): %s",
                          p["element"], p["torsional_hz"], chk["reason"])
-                b = tried[0] = dict(p, placed_by_lines=True)
+                b = tried[0] = dict(p, placed_by_lines=True, spectral_hz=tried[0]["torsional_hz"])
                 ok = ok + [p]
         if not chk["accepted"]:
             d._reject(b["element"], "compliance", "shaft check", None, reason=chk["reason"],
@@ -852,8 +863,6 @@ def screen(d):
         span = [p["torsional_hz"] for p in ok] or [b["torsional_hz"]]
         eff["parameters"]["torsional_frequency"]["range"] = [min(span), max(span)]
         eff["detail"] += f"; {min(span):.3g}-{max(span):.3g} Hz fit about as well" if len(span) > 1 else ""
-        if b.get("placed_by_lines"):
-            eff["detail"] += "; the mode placed by the periodic sources' lines it amplifies"
         rec["claimed"] = b["element"]
         if b.get("new_X") is not None:
             regress.adopt(d, b["new_X"])

@@ -464,7 +464,9 @@ def test_a_shaft_refused_beside_periodic_lines_is_placed_where_the_check_and_the
     monkeypatch.setattr(oth, "_drive_doc", lambda doc, spec, ft, bl, zeta=0.05: {"ft": round(ft, 6)})
     # the refined model as it stands ("now") and re-estimated without a shaft ("polished")
     land.update({"now": (12.0, None, None), "polished": (10.0, None, None)})
-    monkeypatch.setattr(regress, "reestimate", lambda d, doc, label: (doc, {"ft": doc.get("ft", "polished")}, ["X"]))
+    labels = []
+    monkeypatch.setattr(regress, "reestimate", lambda d, doc, label: labels.append(label) or (
+        doc, {"ft": doc.get("ft", "polished")}, ["X"]))
     monkeypatch.setattr(backlash, "_energy", lambda d, sims: land[sims["ft"]][0])
     against = set()
     monkeypatch.setattr(compliance, "_nrmse_check", lambda d, before, after, base, b: against.add(before["ft"]) or {
@@ -477,15 +479,23 @@ def test_a_shaft_refused_beside_periodic_lines_is_placed_where_the_check_and_the
     b = {"element": "sw_leader", "torsional_hz": f0, "zeta": 0.05, "spec": ("sw_leader", 0.1, ("inertia", 0.1)),
          "doc": {}, "misfit": 0.7}
     base = (1.0, 0.5, {})   # the rigid line's misfit: a shaft must reach 0.75
-    p, rows = compliance.line_placed(d, {}, {"run": "run1"}, base, b)
+    memo = {}
+    p, rows = compliance.line_placed(d, {}, {"run": "run1"}, base, b, memo=memo)
     # 13 Hz leaves the least energy but the check refuses it; 11 Hz fails the spectral rule
     assert tried[:2] == [11.0, 12.0]
     assert p["torsional_hz"] == pytest.approx(12.0) and p["new_X"] == ["X"] and p["misfit"] == 0.5
+    assert not p["at_end"]   # 8-13 Hz were tried
     assert [r["torsional_hz"] for r in rows] == pytest.approx([q * f0 for q in compliance.LINE_STEPS])
     assert not next(r for r in rows if r["torsional_hz"] == pytest.approx(13.0))["check"]
     # judged against the polish without a shaft, which left less than the model as it stood
     assert against == {"polished"}
     # nothing the check passes meets the spectral rule: no shaft
     land.update({k: (v[0], v[1], 0.9) for k, v in land.items() if not isinstance(k, str)})
-    p, rows = compliance.line_placed(d, {}, {"run": "run1"}, base, b)
+    p, rows = compliance.line_placed(d, {}, {"run": "run1"}, base, b, memo=memo)
     assert p is None and len(rows) == len(compliance.LINE_STEPS)
+    # the baseline was polished once: the refined layout did not change between the calls
+    assert sum(1 for x in labels if x.startswith("no shaft")) == 1
+    # the last mode tried is an end
+    land.update({13.0: (3.0, True, 0.5)})
+    p, _ = compliance.line_placed(d, {}, {"run": "run1"}, base, b, memo=memo)
+    assert p["torsional_hz"] == pytest.approx(13.0) and p["at_end"]
