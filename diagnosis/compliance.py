@@ -457,6 +457,13 @@ def _scan(d, noise, hump, c, specs, doc0=None, form=None, sets=None):
     return tried, sorted(points.get(tried[0]["element"], []) if tried else [], key=lambda p: p["misfit"])
 
 
+def passes_spectral_rule(p, base):
+    """Shaft ``p`` fits the band :data:`MARGIN` better than the rigid line's ``base``,
+    explains :data:`ripple.EXPLAINED` of the hump, its own drive carries :data:`OWN_MIN`."""
+    return (p["misfit"] <= (1.0 - MARGIN) * base[0] and (p["explained"] or 0.0) >= ripple.EXPLAINED
+            and p["own_share"] >= OWN_MIN)
+
+
 def line_placed(d, noise, hump, base, b, memo=None):
     """The shaft ``b`` (refused by the check beside periodic sources) moved to a mode
     the sources' lines accept: a drive's ripple spectrum places a mode to a grid step,
@@ -494,20 +501,19 @@ def line_placed(d, noise, hump, base, b, memo=None):
         chk = _nrmse_check(d, before, got[1], base, b)
         rise = max((chk["nrmse_after"][s] / chk["nrmse_before"][s] - 1.0 for s in chk["nrmse_before"]
                     if chk["nrmse_before"][s] > 0), default=0.0)
-        rows.append({"torsional_hz": ft, "residual_energy": e, "max_nrmse_rise": rise, "check": chk["accepted"]})
+        row = {"torsional_hz": ft, "residual_energy": e, "max_nrmse_rise": rise, "check": chk["accepted"]}
+        rows.append(row)
         log.info("  shaft of %s at %.3g Hz, the periodic effects re-estimated: residual energy %.4g, "
                  "largest NRMSE rise %+.3g %%", b["element"], ft, e, 100 * rise)
-        steps.append((e, ft, got, chk))
-    for e, ft, (doc, sims, new_X), chk in sorted((x for x in steps if x[3]["accepted"]), key=lambda x: x[0]):
+        steps.append((e, ft, got, chk, row))
+    for e, ft, (doc, sims, new_X), chk, row in sorted((x for x in steps if x[3]["accepted"]), key=lambda x: x[0]):
         got = spectral_fit(d, noise, doc, sims, hump)
         if got is None:
             continue
         p = dict(b, torsional_hz=ft, misfit=got[0], explained=got[1], levels=got[2],
                  own_share=got[3].get(b["element"], 0.0), doc=doc, sims=sims, new_X=new_X, check=chk)
-        row = next(r for r in rows if r["torsional_hz"] == ft)
         row.update(misfit=p["misfit"], explained=p["explained"], own_share=p["own_share"])
-        if p["misfit"] <= (1.0 - MARGIN) * base[0] and (p["explained"] or 0.0) >= ripple.EXPLAINED \
-                and p["own_share"] >= OWN_MIN:
+        if passes_spectral_rule(p, base):
             p["at_end"] = ft in (steps[0][1], steps[-1][1])
             return p, rows
         log.info("  shaft of %s at %.3g Hz (placed by the lines) fails the spectral rule: misfit %.3g (rigid %.3g), "
@@ -820,8 +826,7 @@ def screen(d):
         # the best shaft first; if its deterministic side costs a sensor, the next ones of the
         # scan that still pass the spectral rule (a mode's frequency is fixed by the spectrum
         # only to a grid step or so)
-        ok = [p for p in pts if p["misfit"] <= (1.0 - MARGIN) * base[0] and (p["explained"] or 0.0) >= ripple.EXPLAINED
-              and p["own_share"] >= OWN_MIN]
+        ok = [p for p in pts if passes_spectral_rule(p, base)]
         for p in ok[:CHECK_TRIES] or [b]:
             sims_b = d._simulate_all(p["doc"], f"refined +{p['element']} compliance {p['torsional_hz']:.3g} Hz")
             chk = _nrmse_check(d, d.steps[-1]["sims"], sims_b, base, p)
