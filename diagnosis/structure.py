@@ -777,11 +777,16 @@ def screen(d):
             if name in drive_forms:   # a feed-forward form's dead zone, screened already
                 continue
             drive_forms[name] = sh
-            n0 = len(stage_a)
-            stage_a_one(name, desc, sets)
-            if len(stage_a) > n0:
-                stage_b(*stage_a[-1])
-                to_b.append(stage_a[-1])
+            # ... and without the secondary sources: a shaft that passes the lines between the
+            # zones as the line does leaves a phantom at a primary source's frequency nothing to
+            # carry (independent seed-28 c24: roller9 at roller19's 4.57 Hz, 15 um, kept beside the
+            # leader's shaft at 9.35 Hz, the set without it tried only in the forms without that shaft)
+            for use in ((None, effs_p) if sec_fes else (None,)):
+                n0 = len(stage_a)
+                stage_a_one(name, desc, sets, use)
+                if len(stage_a) > n0:
+                    stage_b(*stage_a[-1])
+                    to_b.append(stage_a[-1])
     not_b = [x for x in stage_a if all(x is not y for y in to_b)]
     top = min((x[0] for x in to_b if "predicted_score" in x[0]), key=lambda e: e["predicted_score"], default=None)
     for entry, alt0, X1s, Gs in not_b:
