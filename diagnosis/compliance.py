@@ -568,6 +568,19 @@ def rise_t(ctxs, before, after, s, blocks=RISE_BLOCKS):
     return m / se if se > 0 else (math.inf if m > 0 else -math.inf)
 
 
+def _mode_source(b):
+    """Where shaft ``b``'s mode comes from, for its detail: the residual's spectrum, or the
+    periodic sources' lines (:func:`line_placed`), then saying where the spectrum had put it
+    and whether it is the last mode tried."""
+    if not b.get("placed_by_lines"):
+        return "from the residual's spectrum"
+    out = (f"placed by the periodic sources' lines it amplifies; the residual's spectrum put it at "
+           f"{b['spectral_hz']:.3g} Hz")
+    if b.get("at_end"):
+        out += "; the last mode tried, where the residual still fell: it may lie further out"
+    return out
+
+
 def _effect(hump, rec, tried, base, chk):
     """The claimed shaft as an effect of the report (the others' record shape)."""
     from webline.diagnosis import structure
@@ -598,11 +611,7 @@ def _effect(hump, rec, tried, base, chk):
                        "damping_ratio": {"estimated": zeta, "unit": "1"},
                        "motor_inertia": {"estimated": others.motor_inertia(spec), "unit": "kg*m^2"},
                        "ripple_density": {"estimated": b["levels"].get(b["element"]), "unit": "N*m/sqrt(Hz)"}},
-        "detail": (f"{b['element']} compliance, torsional mode {ft:.3g} Hz "
-                   + (f"(placed by the periodic sources' lines it amplifies; the residual's spectrum put it at "
-                      f"{b['spectral_hz']:.3g} Hz" + ("; the last mode tried, where the residual still fell: it "
-                                                       "may lie further out" if b.get("at_end") else "") + ")"
-                      if b.get("placed_by_lines") else "(from the residual's spectrum)")
+        "detail": (f"{b['element']} compliance, torsional mode {ft:.3g} Hz ({_mode_source(b)})"
                    + (f", the line in form '{form}'" if form else "")
                    + (f"; {runner['element']}'s shaft fits the band {100 * runner['worse']:.0f} % worse: "
                       f"one band's spectrum does not settle which drive" if runner and not runner["settled"] else "")),
