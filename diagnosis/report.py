@@ -454,6 +454,9 @@ def _rejected(d):
             if e.get("share_left", e["share"]) < opt.min_share:
                 why.append(f"share {100 * e.get('share_left', e['share']):.2g} % of the residual left "
                            f"< {100 * opt.min_share:g} %")
+            if e["share"] < opt.min_share_all:
+                why.append(f"share {100 * e['share']:.2g} % of the whole periodic residual "
+                           f"< {100 * opt.min_share_all:g} %")
             if e["coherence"] < opt.min_coherence:
                 why.append(f"coherence {e['coherence']:.2f} < {opt.min_coherence:g}")
             if not why:
