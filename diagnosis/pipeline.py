@@ -55,11 +55,12 @@ def significant_families(scores, opt):
     ``opt.min_share`` of the periodic residual the families taken before left and
     ``opt.min_share_all`` of the whole. The second share is what keeps a weak line next to
     a dominant source from being claimed on its own z: in the independent benchmark's first
-    looks of seeds 0-29 (1087 periodic sources reported) the two that explained under
-    0.1 % of the periodic residual were both false (seed-28 c05's out-of-round rewind,
-    0.014 %, z 35, 1.1 % of what was left; seed-29 c07's out-of-round unwind, 0.023 %,
-    1.6 % of what was left, beside an eccentric roller19 at 98.6 %), and the weakest true
-    source found explained 0.128 % (seed-25 c12's S-wrap leader, 9.9 % of what was left)."""
+    looks of seeds 2-29 (539 periodic sources reported, 1087 with the re-runs on file) the
+    two that explained under 0.1 % of the periodic residual were both false (seed-28 c05's
+    out-of-round rewind, 0.014 %, z 35, 1.1 % of what was left; seed-29 c07's out-of-round
+    unwind, 0.023 %, 1.6 % of what was left, beside an eccentric roller19 at 98.6 %), and
+    the weakest true source found explained 0.128 % (seed-25 c12's S-wrap leader, 9.9 % of
+    what was left)."""
     return [d for d in scores if d["logp"] < opt.significance and d["share_left"] >= opt.min_share
             and d["share"] >= opt.min_share_all and d["coherence"] >= opt.min_coherence]
 
