@@ -61,8 +61,22 @@ def significant_families(scores, opt):
     unwind, 0.023 %, 1.6 % of what was left, beside an eccentric roller19 at 98.6 %), and
     the weakest true source found explained 0.128 % (seed-25 c12's S-wrap leader, 9.9 % of
     what was left)."""
-    return [d for d in scores if d["logp"] < opt.significance and d["share_left"] >= opt.min_share
-            and d["share"] >= opt.min_share_all and d["coherence"] >= opt.min_coherence]
+    return [d for d in scores if not shortfalls(d["logp"], d["share"], d["share_left"], d["coherence"], opt)]
+
+
+def shortfalls(logp, share, share_left, coherence, opt):
+    """Why a periodic family is not significant (:func:`significant_families`): the
+    thresholds of ``opt`` it misses, as the report words them; empty if none."""
+    why = []
+    if not logp < opt.significance:
+        why.append(f"log10 p {logp:.3g} >= {opt.significance:g}")
+    if share_left < opt.min_share:
+        why.append(f"share {100 * share_left:.2g} % of the residual left < {100 * opt.min_share:g} %")
+    if share < opt.min_share_all:
+        why.append(f"share {100 * share:.2g} % of the whole periodic residual < {100 * opt.min_share_all:g} %")
+    if coherence < opt.min_coherence:
+        why.append(f"coherence {coherence:.2f} < {opt.min_coherence:g}")
+    return why
 
 
 @dataclass

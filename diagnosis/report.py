@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from webline.diagnosis import estimate as est
+from webline.diagnosis.pipeline import shortfalls
 from webline.diagnosis.structure import NOT_IDENTIFIABLE, identifiable_range
 
 SCHEMA = "webline-diagnose-1"
@@ -448,17 +449,7 @@ def _rejected(d):
         for e in step[:5]:
             if e["element"] in chosen:
                 continue
-            why = []
-            if not e["log10_p"] < opt.significance:
-                why.append(f"log10 p {e['log10_p']:.3g} >= {opt.significance:g}")
-            if e.get("share_left", e["share"]) < opt.min_share:
-                why.append(f"share {100 * e.get('share_left', e['share']):.2g} % of the residual left "
-                           f"< {100 * opt.min_share:g} %")
-            if e["share"] < opt.min_share_all:
-                why.append(f"share {100 * e['share']:.2g} % of the whole periodic residual "
-                           f"< {100 * opt.min_share_all:g} %")
-            if e["coherence"] < opt.min_coherence:
-                why.append(f"coherence {e['coherence']:.2f} < {opt.min_coherence:g}")
+            why = shortfalls(e["log10_p"], e["share"], e.get("share_left", e["share"]), e["coherence"], opt)
             if not why:
                 why.append("weaker than the family chosen at this step")
             out.append({"element": e["element"], "kind": e["kind"], "stage": f"periodic screen step {i + 1}",
