@@ -55,7 +55,7 @@ SEC_SHARE = 0.1          # ... a condition only where they explain this share of
 UNRECOVERED_PART = 0.02  # NRMSE^2 the secondary sources explain on a sensor of which the form recovers none (below
 #                          0): they stay, whatever the other rules allow (seed-30 c17: the real roller9, as its tie
 #                          idler_u1, 0.041 on lc9, -13 % recovered; every phantom whose part the form did not recover,
-#                          seeds 3 and 23-30, took 0.01 or less)
+#                          seeds 3, 23 and 25-30, took 0.01 or less)
 TIE = 0.01               # predicted scores within this share of the second best's are simulated too ...
 MAX_TIED = 4             # ... up to this many more
 MAX_SWAPS = 3            # tied members tried in a primary source's place, in the set without the secondary ones
