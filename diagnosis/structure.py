@@ -1023,9 +1023,12 @@ def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
         a = floor.get(s_)
         gap = p ** 2 - a ** 2 if a is not None and math.isfinite(a) and math.isfinite(p) else None
         closes = (p ** 2 - f ** 2) / gap if gap is not None and gap > 0 else None
+        # a part the form leaves whole (it fits the sensor worse than the set without them as
+        # modelled) is no transfer error the form corrects, however small against the NRMSE
+        unrecovered = rec is not None and rec < 0.0 and sec_part >= UNRECOVERED_PART
         rows[s_] = {"full": f, "without_in_layout_form": w, "without_in_form": p,
                     "worse_than_full": (p - f) / f if f > 0 else None, "recovered": rec,
-                    "noise_floor": a, "secondary_closes": closes}
+                    "noise_floor": a, "secondary_closes": closes, "unrecovered": unrecovered}
         # a small gap closed counts only where the form carries the line there itself, when
         # the secondary sources explain much of the sensor: a form that explains none of a
         # large line leaves it to a real second source (independent seed-2 c05: roller9's
@@ -1036,21 +1039,18 @@ def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
         big = sec_part >= SEC_SHARE
         ok = (f > 0 and p <= (1.0 + PARSIMONY) * f) or (rec is not None and rec >= RECOVER) \
             or (closes is not None and closes < CLOSES and (not big or (rec is not None and rec >= RECOVER_MIN)))
-        # a part the form leaves whole (it fits the sensor worse than the set without them as
-        # modelled) is no transfer error the form corrects, however small against the NRMSE
-        unrecovered = rec is not None and rec < 0.0 and sec_part >= UNRECOVERED_PART
-        rows[s_]["unrecovered"] = unrecovered
-        if unrecovered and why is None:
-            why = (f"{s_}: NRMSE {f:.3g} with the secondary sources, {w:.3g} without them in the layout's "
-                   f"form, {p:.3g} without them in the form '{form}': it recovers none of what they explained "
-                   f"there ({w ** 2 - f ** 2:.3g} of NRMSE^2; {UNRECOVERED_PART:g} or more keeps them)")
-        elif not ok and why is None:
-            why = (f"{s_}: NRMSE {f:.3g} with the secondary sources, {w:.3g} without them in the layout's "
-                   f"form, {p:.3g} without them in the form '{form}' (recovers "
-                   f"{100 * (rec if rec is not None else 0.0):.0f} % of what they explained; needs "
-                   f"{100 * RECOVER:.0f} %, or within {100 * PARSIMONY:.0f} % of the full set"
-                   + (f"; they close {100 * closes:.0f} % of the gap to the noise floor {a:.3g}, "
-                      f"{100 * CLOSES:.0f} % or more keeps them" if closes is not None else "") + ")")
+        if why is not None or (ok and not unrecovered):
+            continue
+        why = (f"{s_}: NRMSE {f:.3g} with the secondary sources, {w:.3g} without them in the layout's "
+               f"form, {p:.3g} without them in the form '{form}'")
+        if unrecovered:
+            why += (f": it recovers none of what they explained there ({sec_part:.3g} of NRMSE^2; "
+                    f"{UNRECOVERED_PART:g} or more keeps them)")
+        else:
+            why += (f" (recovers {100 * (rec if rec is not None else 0.0):.0f} % of what they explained; needs "
+                    f"{100 * RECOVER:.0f} %, or within {100 * PARSIMONY:.0f} % of the full set"
+                    + (f"; they close {100 * closes:.0f} % of the gap to the noise floor {a:.3g}, "
+                       f"{100 * CLOSES:.0f} % or more keeps them" if closes is not None else "") + ")")
     return rows, why
 
 
