@@ -900,7 +900,7 @@ def screen(d):
     d.structure["chosen_set"] = chosen["set"]
     d.structure["amplitude_uncertainty"] = unc
     if chosen is not results[0]:
-        _check_readmitted(d, chosen, [(cand, fe) for cand, _, fe in effs if fe is None and cand.element in chosen["X"]],
+        _check_readmitted(d, chosen, [cand for cand, _, fe in effs if fe is None and cand.element in chosen["X"]],
                           sim_fit, unc)
         d.refined_doc = chosen["doc"]
         for cand, X0, fe in pool:
@@ -1308,12 +1308,12 @@ def _check_readmitted(d, chosen, readmitted, sim_fit, unc=None):
     truth, explained 0.18 % of the periodic residual). The weakest failing effect
     leaves first (its local drop the smallest), the others are checked again
     without it: of two at one frequency, the one the joint fit split a line with
-    is judged alone. ``chosen`` loses what fails (doc, sims, X); each goes to
+    is judged alone. ``readmitted``: their candidates. ``chosen`` loses what fails (doc, sims, X); each goes to
     ``d.rejected`` with the numbers."""
     left = list(readmitted)
     while left:
         checks = []
-        for cand, fe in left:
+        for cand in left:
             n = len(chosen["X"][cand.element])
             doc_w = layout_edit.with_fourier(chosen["doc"], cand, np.zeros(n), np.zeros(n))
             try:
@@ -1337,7 +1337,7 @@ def _check_readmitted(d, chosen, readmitted, sim_fit, unc=None):
         chosen["X"] = {k: v for k, v in chosen["X"].items() if k != cand.element}
         if unc is not None:
             unc.pop(cand.element, None)
-        left = [(c, f) for c, f in left if c is not cand]
+        left = [c for c in left if c is not cand]
 
 
 def _readmit(d, cand, X):

@@ -217,20 +217,27 @@ def alpha_trend(per_run, a):
     return lambda fh: complex(np.exp(Lm + b * (fh - fm)))
 
 
+def _row_weight(fit, c, s, cand, j):
+    """Whitening weight of order ``j`` on sensor ``s`` in run ``c``: ``|Y|^2 w`` is the
+    harmonic's z (Exp(1) for noise), from the fit runs' noise floor at that frequency;
+    None if no fit run has the sensor."""
+    ws = _weights(fit, s, j * c.freq.get(cand.key, 0.0))
+    return None if ws is None else ws * c.T / 2.0
+
+
 def _vec(resp, ctxs, fit, cand, i, j):
     """Order ``j`` (index ``i``) of the responses ``resp`` over the runs ``ctxs`` and
-    their sensors, with each one's whitening weight: ``|Y|^2 w`` is the harmonic's z
-    (Exp(1) for noise), from the fit runs' noise floor at that frequency."""
+    their sensors, with each one's whitening weight (:func:`_row_weight`)."""
     v, w = [], []
     for c in ctxs:
         for s in c.sensors:
             if c.name not in resp or s not in resp[c.name]:
                 continue
-            ws = _weights(fit, s, j * c.freq.get(cand.key, 0.0))
+            ws = _row_weight(fit, c, s, cand, j)
             if ws is None:
                 continue
             v.append(resp[c.name][s][i])
-            w.append(ws * c.T / 2.0)
+            w.append(ws)
     return np.array(v, complex), np.array(w, float)
 
 
@@ -346,19 +353,15 @@ def carried(M, G0, fit, cand, i, j):
     the fit run, z 82; at the held-out run's 19.1 Hz the refined model put 0.26 N there
     for the data's 0.097 N, the lines predicted it would help in 90 % of them, and lc9's
     held-out NRMSE went 1.132 -> 1.188; without the order 1.123)."""
-    from scipy import stats
-
-    from webline.diagnosis import claims
     out = {}
     for c in fit:
         for s in c.sensors:
             if c.name not in M or s not in M[c.name] or c.name not in G0 or s not in G0[c.name]:
                 continue
-            ws = _weights(fit, s, j * c.freq.get(cand.key, 0.0))
-            if ws is None:
+            w = _row_weight(fit, c, s, cand, j)
+            if w is None:
                 continue
             m, g = M[c.name][s][i], G0[c.name][s][i]
-            w = ws * c.T / 2.0
             e = out.setdefault(s, [0.0, 0.0, 0])
             e[0] += w * abs(m) ** 2
             e[1] += w * abs(m - g) ** 2
@@ -366,9 +369,9 @@ def carried(M, G0, fit, cand, i, j):
     res = {}
     for s, (zm, zl, n) in out.items():
         left = zl / zm if zm > 0 else 0.0
-        log10_p = float(stats.gamma.logsf(zl, n)) / np.log(10.0)   # each row's z is Exp(1) for noise
+        # each row's z is Exp(1) for noise: their sum Gamma(rows, 1), as claims' orders left
         res[s] = {"left": float(left), "z": float(zl),
-                  "carried": not (left >= FIT_LEFT and log10_p < claims.ORDER_LOG10_P)}
+                  "carried": not (left >= FIT_LEFT and est.gamma_log10_sf(zl, n) < claims.ORDER_LOG10_P)}
     return res
 
 

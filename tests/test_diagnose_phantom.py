@@ -400,7 +400,7 @@ def test_a_readmitted_effect_is_checked_alone_in_its_form(monkeypatch):
               "X": {"roller9": [1e-4], "idler_r1": [3e-6]}}
     chosen["sims"] = {"doc": chosen["doc"]}
     unc = {"roller9": {}, "idler_r1": {}}
-    structure._check_readmitted(d, chosen, [(r9, None), (r1, None)], lambda doc, label: {"doc": doc}, unc)
+    structure._check_readmitted(d, chosen, [r9, r1], lambda doc, label: {"doc": doc}, unc)
     assert [r[0] for r in rejected] == ["idler_r1"] and rejected[0][1] == "structure readmission check"
     assert chosen["doc"]["has"] == ("roller9",) and set(chosen["X"]) == {"roller9"} and set(unc) == {"roller9"}
     # roller9 was asked again without the phantom, and passed there
@@ -409,5 +409,5 @@ def test_a_readmitted_effect_is_checked_alone_in_its_form(monkeypatch):
     rejected.clear()
     chosen = {"name": "f", "doc": {"has": ("roller9",)}, "X": {"roller9": [1e-4]}}
     chosen["sims"] = {"doc": chosen["doc"]}
-    structure._check_readmitted(d, chosen, [(r9, None)], lambda doc, label: {"doc": doc})
+    structure._check_readmitted(d, chosen, [r9], lambda doc, label: {"doc": doc})
     assert rejected == [] and chosen["doc"]["has"] == ("roller9",)
