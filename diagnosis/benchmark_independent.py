@@ -627,7 +627,8 @@ def case_targets(truth, report, score=None):
     drive = [f for f in found if f["kind"] in B.DRIVE_KINDS]
     # shafts the report names as possible but does not claim (compliance.refused): not a find,
     # counted beside the recall, with those on a drive that has no hidden shaft
-    possible = [f.get("element") for f in (report or {}).get("findings") or [] if f.get("kind") == "possible drive shaft"]
+    named = [f for f in (report or {}).get("findings") or [] if f.get("kind") == "possible drive shaft"]
+    possible = [f.get("element") for f in named]
     shafts = {t["element"] for t in truth["effects"] if t["kind"] == "compliance"}
     return {
         "true": score["n_true"], "reported": len(reported), "matched": len(kept), "other_reports": other,
@@ -644,8 +645,16 @@ def case_targets(truth, report, score=None):
         "invented_any": len(everything) if noise_only else 0,
         "drive": drive,
         "effects": found,
-        "possible_shafts": {"named": len(possible), "on_a_hidden_shaft": sum(e in shafts for e in possible)},
+        "possible_shafts": {"named": len(possible), "on_a_hidden_shaft": sum(e in shafts for e in possible),
+                            "held_out_lower": sum(_held_out_lower(f.get("holdout")) for f in named)},
     }
+
+
+def _held_out_lower(h):
+    """Whether a possible shaft's held-out view (compliance.holdout_view) lowers every sensor's NRMSE."""
+    if not h or not h.get("nrmse_before"):
+        return False
+    return all(h["nrmse_after"][s] < v for s, v in h["nrmse_before"].items())
 
 
 def _per_kind(truth, reported, kept):
@@ -668,7 +677,7 @@ def target_scores(results):
     diagnosed = 0
     drive = {"true": 0, "matched": 0, "detectable": 0, "matched_detectable": 0, "unknown": 0}
     every = dict(drive)
-    possible = {"named": 0, "on_a_hidden_shaft": 0}
+    possible = {"named": 0, "on_a_hidden_shaft": 0, "held_out_lower": 0}
     for res in results:
         tr, rep = res["truth"], res.get("report")
         if rep is None:
@@ -695,7 +704,7 @@ def target_scores(results):
                     lst.append(v["closed_share"])
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
         for k in possible:
-            possible[k] += c["possible_shafts"][k]
+            possible[k] += c["possible_shafts"].get(k, 0)
         for dv in c["effects"]:
             for d in (every, drive) if dv["kind"] in B.DRIVE_KINDS else (every,):
                 d["true"] += 1
@@ -804,7 +813,8 @@ def _possible_cell(p):
     """'; N shafts named possible, not claimed (k on a drive with a hidden shaft)', or ''."""
     if not p or not p.get("named"):
         return ""
-    return f"; {p['named']} shaft(s) named possible, not claimed ({p['on_a_hidden_shaft']} on a hidden shaft)"
+    return (f"; {p['named']} shaft(s) named possible, not claimed ({p['on_a_hidden_shaft']} on a hidden shaft; "
+            f"{p.get('held_out_lower', 0)} lowering every sensor's NRMSE on the held-out runs)")
 
 
 def _recall_cell(d):
