@@ -48,6 +48,7 @@ leaves open move the response by tens of per cent; the statistical error of an
 order alone says nothing of that.
 """
 import logging
+import math
 
 import numpy as np
 
@@ -247,7 +248,15 @@ def _scale(gk, m, wm):
     return complex(np.sum(wm * np.conj(gk) * m)) / den if den > 0 else 0.0
 
 
-def amplitude_ranges(M, G, cand, orders, fit, X, X0):
+def line_coefficients(doc, cand, X, n_lines_like_refined):
+    """The effect's own coefficients in a line's layout ``doc``: the refined ``X`` for the
+    refined model and the lines drawn around it (``n_lines_like_refined`` true), else
+    what that model form's layout holds (its own estimate, or the layout's own series
+    where the form's set of sources does not hold this element)."""
+    return np.asarray(X, complex) if n_lines_like_refined else layout_edit.current_fourier(doc, cand.element, len(X))
+
+
+def amplitude_ranges(M, G, cand, orders, fit, X, X0, Xs=None):
     """Per order: the amplitude each line would need, ``|alpha_k| |X_j|`` with
     ``alpha_k`` the scale line k's response needs to match the measured harmonics of
     the fit runs (member 0, the refined model, needs about 1; ``X0`` = the layout's
@@ -257,15 +266,28 @@ def amplitude_ranges(M, G, cand, orders, fit, X, X0):
     fix the product of response and run-out, and lines within the data sheet's
     tolerances answer a given run-out by up to a few tens of per cent more or less
     (independent seed 1: dominant orders off by 22-30 % with the statistical error
-    under 1 %), so the whole range is what these runs know of the amplitude."""
+    under 1 %), so the whole range is what these runs know of the amplitude.
+
+    ``Xs`` = each line's own coefficients (:func:`line_coefficients`; default ``X`` in
+    every line): a line's response is to what its layout holds, and a line whose
+    layout does not hold this order of the effect (a model form whose set of sources
+    has another element of its family in its place) answers nothing about it and is
+    left out (independent seed-32 c05: roller9, chosen in the place of idler_u1; the
+    fifteen forms holding idler_u1 "needed" 0.3-1.2 m of roller9's run-out, the lines
+    around the chosen form 0.72-1.06 mm)."""
     out = {}
+    Xs = [X] * len(G) if Xs is None else Xs
     for i, j in enumerate(orders):
         m, wm = _vec(M, fit, fit, cand, i, j)
         if len(m) == 0 or abs(X[j - 1]) == 0:
             continue
-        dx = X[j - 1] - X0[j - 1]
         amps, chi2 = [], []
-        for Gk in G:
+        for Gk, Xk in zip(G, Xs):
+            dx = Xk[j - 1] - X0[j - 1]
+            if dx == 0:
+                amps.append(math.nan)
+                chi2.append(math.nan)
+                continue
             gk = _vec(Gk, fit, fit, cand, i, j)[0]
             a = _scale(gk, m, wm)
             amps.append(abs(X0[j - 1] + a * dx))
@@ -298,7 +320,7 @@ def same_frequency_groups(plan, fit):
     return [g for g in groups if len(g) > 1]
 
 
-def joint_amplitude_ranges(M, G, members, fit):
+def joint_amplitude_ranges(M, G, members, fit, Xs=None):
     """:func:`amplitude_ranges` for sources at one frequency (independent seed-11 c17:
     two rollers of one radius, 0.56 and 0.15 mm at order 1; reported 0.52 and 0.089
     mm, the second 39 % low, not flagged). Their lines add on every sensor, so each
@@ -310,8 +332,12 @@ def joint_amplitude_ranges(M, G, members, fit):
 
     ``M`` = measured harmonics on the first member's angle over the union of orders;
     ``G`` = [per line: [per member: responses on that angle]]; ``members`` = [(cand,
-    orders, X, X0)]. Returns {element: {order: {"range", "by_line", "chi2"}}}."""
+    orders, X, X0)]; ``Xs`` = [per line: [per member: that line's own coefficients]]
+    (default: each member's X in every line; a line that does not hold one of the
+    members at an order is left out of that order, as in :func:`amplitude_ranges`).
+    Returns {element: {order: {"range", "by_line", "chi2"}}}."""
     ref = members[0][0]
+    Xs = [[X for _c, _o, X, _X0 in members]] * len(G) if Xs is None else Xs
     union = sorted({j for _c, orders, _X, _X0 in members for j in orders})
     out = {cand.element: {} for cand, *_r in members}
     for i, j in enumerate(union):
@@ -321,15 +347,17 @@ def joint_amplitude_ranges(M, G, members, fit):
             continue
         amps, chi2 = {e: [] for e in on}, []
         sw = np.sqrt(wm)
-        for Gk in G:
+        for Gk, Xk in zip(G, Xs):
+            if any(Xk[e][j - 1] == members[e][3][j - 1] for e in on):
+                continue
             A = np.column_stack([_vec(Gk[e], fit, fit, ref, i, j)[0] for e in on])
             if A.shape[0] != len(m) or not np.all(np.isfinite(A)):
                 continue
             a = np.linalg.lstsq(sw[:, None] * A, sw * m, rcond=None)[0]
             chi2.append(float(np.sum(wm * np.abs(m - A @ a) ** 2)))
             for e, ae in zip(on, a):
-                _c, _o, X, X0 = members[e]
-                amps[e].append(abs(X0[j - 1] + ae * (X[j - 1] - X0[j - 1])))
+                X0 = members[e][3]
+                amps[e].append(abs(X0[j - 1] + ae * (Xk[e][j - 1] - X0[j - 1])))
         for e in on:
             ok = [a for a in amps[e] if np.isfinite(a) and a > 0]
             if ok:
@@ -522,10 +550,14 @@ def screen(d):
     ks = [k for k in range(len(docs)) if k not in failed]
     n_groups = len({groups[k] for k in ks})
     prior = np.array([1.0 / n_groups / sum(1 for q in ks if groups[q] == groups[k]) for k in ks])
+    # each line's own coefficients: the refined model and its drawn lines hold the refined X
+    own = {cand.element: [line_coefficients(docs[k], cand, X, k <= len(draws)) for k in ks]
+           for cand, _orders, X, _X0 in plan}
     ranges = {cand.element: amplitude_ranges(M[cand.element], [G[cand.element][k] for k in ks], cand, orders,
-                                             fit, X, X0) for cand, orders, X, X0 in plan}
+                                             fit, X, X0, Xs=own[cand.element]) for cand, orders, X, X0 in plan}
     for g, idx in enumerate(shared):
-        joint = joint_amplitude_ranges(MJ[g], [GJ[g][k] for k in ks], [plan[e] for e in idx], fit)
+        joint = joint_amplitude_ranges(MJ[g], [GJ[g][k] for k in ks], [plan[e] for e in idx], fit,
+                                       Xs=[[own[plan[e][0].element][q] for e in idx] for q in range(len(ks))])
         for el, rg in joint.items():
             ranges[el].update(rg)
         exact = sorted({j for rg in joint.values() for j, v in rg.items() if v.get("exact")})

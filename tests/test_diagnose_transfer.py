@@ -272,6 +272,34 @@ def test_amplitude_range_is_what_each_line_needs():
     assert got[1]["by_line"] == pytest.approx([3e-4, 3e-4 / 0.8, 1.5e-4], rel=1e-12)
 
 
+def test_a_line_answers_for_what_its_layout_holds_and_a_line_without_the_effect_is_left_out():
+    """A model form's line holds its own estimate: one holding half the refined X whose
+    response matches the data as the refined model's does needs that half; a form whose
+    set of sources has another element in this one's place holds the layout's own series
+    (here none) and answers a near-zero response (it would have "needed" 1e6 x X): left
+    out. The refined line and a drawn line hold X itself."""
+    X = np.array([3e-4 * np.exp(0.4j)])
+    X0 = np.zeros(1, complex)
+    g0 = np.array([2.0 + 1.0j, -0.5 + 0.3j])
+    M = _resp(FIT, g0)
+    G = [_resp(FIT, g0), _resp(FIT, 0.8 * g0), _resp(FIT, g0), _resp(FIT, 1e-6 * g0)]
+    Xs = [X, X, 0.5 * X, X0]
+    got = transfer.amplitude_ranges(M, G, CAND, [1], [FIT], X, X0, Xs=Xs)
+    assert got[1]["by_line"] == pytest.approx([3e-4, 3e-4 / 0.8, 1.5e-4], rel=1e-12)
+    assert got[1]["range"] == pytest.approx([1.5e-4, 3e-4 / 0.8], rel=1e-12)
+    # without the lines' own coefficients the empty form's line would set the range's top
+    assert transfer.amplitude_ranges(M, G, CAND, [1], [FIT], X, X0)[1]["range"][1] == pytest.approx(3e2, rel=1e-9)
+    # the same for two sources at one frequency: a line lacking one of them is left out
+    c2 = SimpleNamespace(key=KEY, element="roller19", kind="eccentricity")
+    X2 = np.array([1.5e-4 * np.exp(1.0j)])
+    g1, g2 = np.array([2.0 + 0.5j, 0.8 + 0.1j]), np.array([0.9 + 0.3j, 0.5 + 0.05j])
+    members = [(CAND, [1], X, X0), (c2, [1], X2, X0)]
+    GJ = [[_resp(FIT, g1), _resp(FIT, g2)], [_resp(FIT, g1), _resp(FIT, 1e-9 * g2)]]
+    got = transfer.joint_amplitude_ranges(_resp(FIT, g1 + g2), GJ, members, [FIT], Xs=[[X, X2], [X, X0]])
+    assert got["roller9"][1]["by_line"] == pytest.approx([3e-4], rel=1e-9)
+    assert got["roller19"][1]["by_line"] == pytest.approx([1.5e-4], rel=1e-9)
+
+
 def test_a_range_wider_than_a_factor_2_is_not_identifiable():
     """report.py: an order whose lines need amplitudes more than NOT_IDENTIFIABLE
     apart is flagged, with the range; a narrow range keeps the statistical verdict."""
