@@ -248,16 +248,17 @@ def _scale(gk, m, wm):
     return complex(np.sum(wm * np.conj(gk) * m)) / den if den > 0 else 0.0
 
 
-def line_coefficients(doc, cand, X, n_lines_like_refined):
+def line_coefficients(doc, cand, X, holds_refined):
     """The effect's own coefficients in a line's layout ``doc``: the refined ``X`` for the
-    refined model and the lines drawn around it (``n_lines_like_refined`` true), else
-    what that model form's layout holds (its own estimate, or the layout's own series
-    where the form's set of sources does not hold this element)."""
-    return np.asarray(X, complex) if n_lines_like_refined else layout_edit.current_fourier(doc, cand.element, len(X))
+    refined model and the lines drawn around it (``holds_refined``), else what that model
+    form's layout holds (its own estimate, or the layout's own series where the form's
+    set of sources does not hold this element)."""
+    return np.asarray(X, complex) if holds_refined else layout_edit.current_fourier(doc, cand.element, len(X))
 
 
 def amplitude_ranges(M, G, cand, orders, fit, X, X0, Xs=None):
-    """Per order: the amplitude each line would need, ``|alpha_k| |X_j|`` with
+    """Per order: the amplitude each line would need, ``|X0_j + alpha_k (X_kj - X0_j)|``
+    (``X_k`` = what line k's layout holds, ``Xs``; the refined ``X`` by default) with
     ``alpha_k`` the scale line k's response needs to match the measured harmonics of
     the fit runs (member 0, the refined model, needs about 1; ``X0`` = the layout's
     own coefficients, which the responses are taken against). Returns
