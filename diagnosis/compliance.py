@@ -938,10 +938,13 @@ def refused(records):
     residual spectrum, misfit 0.53 -> 0.064, and was refused for a 0.19 % rise,
     t = 1.9; the truth's shaft sat at 11.3 Hz)."""
     out = []
+    # a drive whose shaft another band claimed is not "possible, not claimed" (independent
+    # seed-18 c21: the rewind's shaft refused at 10.9 Hz in 3.15-12.6 Hz, claimed at 11.2 Hz in 8-32 Hz)
+    claimed = {rec.get("claimed") for rec in records or [] if rec.get("claimed")}
     for rec in records or []:
         r = rec.get("refused")
         if not r or not math.isfinite(r["rise_t"]) or r["rise_t"] > RISE_T \
-                or any(f["element"] == r["element"] for f in out):   # the best band per drive
+                or any(f["element"] == r["element"] for f in out) or r["element"] in claimed:   # the best band per drive
             continue
         hp = rec["hump"]
         band = hp.get("band_hz") or [hp["frequency_hz"], hp["frequency_hz"]]

@@ -91,6 +91,10 @@ def test_a_shaft_refused_within_noise_is_a_finding_once_per_drive_and_not_beyond
     assert out[0]["kind"] == "possible drive shaft"
     assert "near 10 Hz" in out[0]["text"] and "5-20 Hz" in out[0]["text"] and "0.19 %" in out[0]["text"]
     assert compliance.refused(None) == []
+    # a drive whose shaft another band claimed is no possible shaft
+    claimed = {"hump": {"kind": "spectral misfit", "run": "run1", "sensor": "lc9.T", "frequency_hz": 16.0},
+               "claimed": "unwind", "tried": [], "rigid": {"form": "as modelled"}}
+    assert compliance.refused([rec("unwind", 10.0, 1.9), claimed]) == []
 
 
 def test_the_reported_sources_lines_leave_the_residual_and_a_broad_hump_stays():
