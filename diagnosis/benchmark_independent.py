@@ -704,7 +704,7 @@ def target_scores(results):
                     lst.append(v["closed_share"])
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
         for k in possible:
-            possible[k] += c["possible_shafts"].get(k, 0)
+            possible[k] += c["possible_shafts"][k]
         for dv in c["effects"]:
             for d in (every, drive) if dv["kind"] in B.DRIVE_KINDS else (every,):
                 d["true"] += 1
@@ -814,7 +814,7 @@ def _possible_cell(p):
     if not p or not p.get("named"):
         return ""
     return (f"; {p['named']} shaft(s) named possible, not claimed ({p['on_a_hidden_shaft']} on a hidden shaft; "
-            f"{p.get('held_out_lower', 0)} lowering every sensor's NRMSE on the held-out runs)")
+            f"{p['held_out_lower']} lowering every sensor's NRMSE on the held-out runs)")
 
 
 def _recall_cell(d):

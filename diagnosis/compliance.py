@@ -531,9 +531,8 @@ def _nrmse_check(d, before, after, base, b):
     block (:func:`rise_t` above :data:`RISE_T`) or is within noise: a shaft the
     spectrum supports and noise alone refuses is worth another run."""
     fit = d.fit_ctx()
-    sensors = list(dict.fromkeys(s for c in fit for s in c.sensors))
-    nb = {s: claims.nrmse_over(fit, before, s) for s in sensors}
-    na = {s: claims.nrmse_over(fit, after, s) for s in sensors}
+    nb, na = _nrmse_by_sensor(fit, before), _nrmse_by_sensor(fit, after)
+    sensors = list(nb)
     bad = {s: (na[s] - nb[s]) / nb[s] for s in sensors
            if nb[s] > 0 and np.isfinite(na[s]) and (na[s] - nb[s]) / nb[s] > MAX_WORSE}
     t = {s: rise_t(fit, before, after, s) for s in bad}
@@ -546,6 +545,17 @@ def _nrmse_check(d, before, after, base, b):
                            *max(((s, 100 * w) for s, w in bad.items()), key=lambda x: x[1]),
                            100 * MAX_WORSE, t[max(bad, key=bad.get)],
                            "within noise" if t[max(bad, key=bad.get)] <= RISE_T else "beyond noise"))}
+
+
+def _nrmse_by_sensor(ctxs, sims):
+    """{sensor: NRMSE over the joined records of ``ctxs``} of simulations ``sims`` (by run)."""
+    sensors = dict.fromkeys(s for c in ctxs for s in c.sensors)
+    return {s: claims.nrmse_over(ctxs, sims, s) for s in sensors}
+
+
+def _within_noise(r):
+    """Whether a refused shaft's rise (``rec["refused"]``) is within noise block by block."""
+    return math.isfinite(r["rise_t"]) and r["rise_t"] <= RISE_T
 
 
 def holdout_view(d, p):
@@ -565,11 +575,9 @@ def holdout_view(d, p):
                                 ctxs=ho)
     except Exception as exc:  # noqa: BLE001 - a statement beside a refusal: say it failed, go on
         return {"failed": (str(exc).splitlines() or [""])[0][:200]}
-    sensors = list(dict.fromkeys(s for c in ho for s in c.sensors))
-    return {"runs": [c.name for c in ho],
-            "nrmse_before": {s: claims.nrmse_over(ho, before, s) for s in sensors},
-            "nrmse_after": {s: claims.nrmse_over(ho, after, s) for s in sensors},
-            "rise_t": {s: rise_t(ho, before, after, s) for s in sensors}}
+    nb = _nrmse_by_sensor(ho, before)
+    return {"runs": [c.name for c in ho], "nrmse_before": nb, "nrmse_after": _nrmse_by_sensor(ho, after),
+            "rise_t": {s: rise_t(ho, before, after, s) for s in nb}}
 
 
 def _holdout_text(h):
@@ -910,7 +918,12 @@ def screen(d):
                               "explained": b["explained"], "misfit": b["misfit"], "rigid_misfit": base[0],
                               "sensor": worst, "rise": chk["nrmse_after"][worst] / chk["nrmse_before"][worst] - 1.0,
                               "rise_t": chk["rise_t"][worst]}
-            rec["refused"]["holdout"] = holdout_view(d, checked)
+            # the held-out view goes with the finding :func:`refused` makes: the first refusal
+            # within noise per drive (a later band's refusal of the same drive is not shown)
+            r = rec["refused"]
+            if _within_noise(r) and not any(x is not rec and x.get("refused") and _within_noise(x["refused"])
+                                            and x["refused"]["element"] == r["element"] for x in d.compliance):
+                r["holdout"] = holdout_view(d, checked)
             continue
         eff = _effect(hump, rec, tried, base, chk)
         # the spectrum fixes the mode only as well as the shafts that pass the rule agree
@@ -943,7 +956,7 @@ def refused(records):
     claimed = {rec.get("claimed") for rec in records or [] if rec.get("claimed")}
     for rec in records or []:
         r = rec.get("refused")
-        if not r or not math.isfinite(r["rise_t"]) or r["rise_t"] > RISE_T \
+        if not r or not _within_noise(r) \
                 or any(f["element"] == r["element"] for f in out) or r["element"] in claimed:   # the best band per drive
             continue
         hp = rec["hump"]
