@@ -462,3 +462,24 @@ def test_the_set_without_a_secondary_source_is_tried_in_lines_within_the_data_sh
     assert structure.TOLERANCE_SIMULATED == 2
     assert simulated == best
     assert [x[0]["name"] for x in to_b[1:]] == best and to_b[0] == ("already queued",)
+
+
+def test_a_line_within_the_data_sheet_must_fit_every_sensor_as_well_as_the_full_set():
+    """structure.tolerance_line_refused, on seed-27 c05's and seed-33 c07's measured NRMSE:
+    a set in a drawn line may replace the full set only within PARSIMONY on every sensor."""
+    from webline.diagnosis.structure import PARSIMONY, tolerance_line_refused
+    line = {"draw": 7, "of": 12, "set": {}}
+    # seed-27 c05: roller9 and roller19 real; the line with idler_u1 alone trades lc19 for lc9
+    r = {"form": "feedforward none + web damping 2 ms + line 7 within the data sheet", "tolerance_line": line,
+         "nrmse": {"lc9.T": 0.3605, "lc19.T": 0.4763}}
+    full = {"nrmse": {"lc9.T": 0.4756, "lc19.T": 0.2742}}
+    why = tolerance_line_refused(r, full)
+    assert why and "lc19.T 0.476 against 0.274" in why and "lc9.T" not in why
+    # seed-33 c07: the phantom idler_u1 goes, lc19 0.5 % above the full set's
+    assert tolerance_line_refused({**r, "nrmse": {"lc9.T": 0.8079, "lc19.T": 0.6967}},
+                                  {"nrmse": {"lc9.T": 0.8106, "lc19.T": 0.6932}}) is None
+    # the bound, and a form that is no drawn line is parsimony_rule's business
+    edge = (1.0 + PARSIMONY) * 0.2742
+    assert tolerance_line_refused({**r, "nrmse": {"lc9.T": 0.4, "lc19.T": edge}}, full) is None
+    assert tolerance_line_refused({**r, "nrmse": {"lc9.T": 0.4, "lc19.T": 1.001 * edge}}, full)
+    assert tolerance_line_refused({"form": "feedforward none", "nrmse": r["nrmse"]}, full) is None
