@@ -84,6 +84,18 @@ def members(base_doc, refined_doc, n=MEMBERS, seed=SEED, tol=None):
     return out
 
 
+def drawn_around(d, doc):
+    """``doc`` as :func:`members` should see it: a line within the tolerances that the model
+    form holds (``d.structure["tolerance_line"]``, chosen by parsimony) is one draw, not an
+    estimate, so its keys are drawn again like the data sheet's own."""
+    tl = (getattr(d, "structure", None) or {}).get("tolerance_line")
+    if not tl:
+        return doc
+    out = dict(doc)
+    out["set"] = {k: v for k, v in (doc.get("set") or {}).items() if k not in tl["set"]}
+    return out
+
+
 def _with_set(doc, s):
     doc = dict(doc)
     doc["set"] = {**(doc.get("set") or {}), **s}
@@ -493,7 +505,7 @@ def screen(d):
     doc = d.refined_doc
     # the lines: the refined model, lines within the tolerances around it, and the
     # other model forms that fit about as well; each form is one hypothesis
-    draws = [_with_set(doc, s) for s in members(base, doc)]
+    draws = [_with_set(doc, s) for s in members(base, drawn_around(d, doc))]
     forms = [fd for _name, fd in getattr(d, "form_members", []) or []]
     docs = [doc] + draws + forms
     groups = [0] * (1 + len(draws)) + list(range(1, len(forms) + 1))

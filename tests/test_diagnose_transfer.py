@@ -376,3 +376,30 @@ def test_only_sources_turning_at_one_speed_are_grouped():
     fit = [SimpleNamespace(T=40.0, freq={"a": 3.6460, "b": 3.6465, "c": 3.6460 + 1.5 / 40.0})]
     plan = [(cand(k), [1], None, None) for k in "abc"]
     assert transfer.same_frequency_groups(plan, fit) == [[0, 1]]
+
+
+def test_a_tolerance_line_in_the_model_form_is_drawn_again():
+    """transfer.drawn_around: the keys of a line within the tolerances that parsimony put
+    in the model form are not estimates, so the transfer screen's lines draw them again;
+    an estimated key (any other in the refined layout's set) stays the layout's."""
+    from pathlib import Path
+    from types import SimpleNamespace
+    from webline.diagnosis import layout_edit, transfer
+    from webline.diagnosis.line_model import LineModel
+    ewl = Path(__file__).resolve().parents[1] / "scenarios" / "ewl.yaml"
+    model = LineModel(ewl)
+    base = layout_edit._plain_base(model.copy_doc())
+    line = transfer.members(base, model.copy_doc(), n=1)[0]
+    estimated = {"path.idler_u1.eccentricity": "0.1 mm", "web.damping": "2 ms"}
+    doc = {**model.copy_doc(), "set": {**line, **estimated}}
+    d = SimpleNamespace(structure={"tolerance_line": {"draw": 1, "of": 12, "set": line}})
+    around = transfer.drawn_around(d, doc)
+    assert around["set"] == estimated and doc["set"] == {**line, **estimated}
+    drawn = transfer.members(base, around, n=3)
+    inertia = [k for k in line if k.endswith(("inertia", "mass"))]
+    assert inertia and all(k in m for m in drawn for k in inertia)
+    assert not any("web.damping" in m or "path.idler_u1.eccentricity" in m for m in drawn)
+    # without a line in the form, the refined layout's keys are all left to it
+    plain = transfer.drawn_around(SimpleNamespace(structure={"chosen": "as modelled"}), doc)
+    assert plain is doc
+    assert not any(k in m for m in transfer.members(base, plain, n=3) for k in inertia)
