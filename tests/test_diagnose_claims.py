@@ -456,6 +456,27 @@ def test_a_shaft_form_with_another_member_of_a_tie_competes_with_every_members_r
     assert entries[4] in structure.drive_forms_cleared(entries, shafts)
 
 
+def test_a_drive_form_competes_with_the_rigid_forms_in_its_own_parameters():
+    """Independent seed-8 c24 (eccentric idler_r1, 2.8 deg dead zone on the leader): without
+    the phantom roller19, the dead-zone form with idler_r1 in idler_u1's place scored 0.699,
+    21 % under the best rigid set in the layout's parameters (0.890). A line drawn within
+    the data sheet's tolerances (the best of twelve draws, structure._tolerance_lines) scored
+    0.649: it is a search the dead-zone form never had, so it does not unseat it."""
+    from webline.diagnosis import structure
+
+    dz = "feedforward reference + dead zone on sw_leader"
+    forms = {dz: ("sw_leader", "backlash", 1.0)}
+    w, swap = ["roller19"], {"replaced": "idler_u1", "by": "idler_r1"}
+    entries = [{"form": "feedforward reference + web damping 2 ms", "score": 0.890, "without": w, "swap": swap},
+               {"form": dz, "score": 0.699, "without": w, "swap": swap},
+               {"form": "feedforward none + load-cell filter order 2 + line 9 within the data sheet",
+                "score": 0.649, "without": w, "swap": swap, "tolerance_line": {"draw": 9, "of": 12, "set": {}}}]
+    assert structure.drive_forms_cleared(entries, forms) == entries
+    # the same score as a form in the layout's parameters would unseat it
+    entries[2].pop("tolerance_line")
+    assert entries[1] not in structure.drive_forms_cleared(entries, forms)
+
+
 def _weak_roll_beside_strong_idler(rescale=True):
     fs, n = 100.0, 6000
     t = np.arange(n) / fs
