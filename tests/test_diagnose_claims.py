@@ -456,6 +456,26 @@ def test_a_shaft_form_with_another_member_of_a_tie_competes_with_every_members_r
     assert entries[4] in structure.drive_forms_cleared(entries, shafts)
 
 
+def test_a_held_out_sensor_fit_worse_is_named_in_the_verdict():
+    """report.held_out_worse: a held-out sensor whose refined NRMSE is above the nominal
+    one is named with both values (independent seed-34 c02's lc19); one fit better or
+    equal, or a report without held-out runs, gives nothing."""
+    from webline.diagnosis.report import held_out_worse
+
+    def g(a, b):
+        return {"nominal": {"nrmse": a}, "refined": {"nrmse": b}}
+
+    rep = {"holdout": {"holdout_runs": ["run3"],
+                       "out_of_sample": {"lc9.T": g(1.1723, 1.1711), "lc19.T": g(1.0114, 1.0128)}}}
+    got = held_out_worse(rep)
+    assert len(got) == 1 and got[0].startswith("Held out (run3)"), got
+    assert "lc19.T" in got[0] and "1.011 -> 1.013" in got[0] and "+0.14 %" in got[0] and "lc9.T" not in got[0], got
+    rep["holdout"]["out_of_sample"]["lc19.T"] = g(1.0114, 1.0114)
+    assert held_out_worse(rep) == []
+    assert held_out_worse({"holdout": {"fit_runs": ["run1"], "in_sample": {}, "out_of_sample": None}}) == []
+    assert held_out_worse({}) == []
+
+
 def test_a_drive_form_competes_with_the_rigid_forms_in_its_own_parameters():
     """Independent seed-8 c24 (eccentric idler_r1, 2.8 deg dead zone on the leader): without
     the phantom roller19, the dead-zone form with idler_r1 in idler_u1's place scored 0.699,
