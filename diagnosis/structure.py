@@ -122,6 +122,13 @@ SHAFT_MARGIN = 0.1   # a drive form's sum of NRMSE^2 below the best rigid form's
 DEAD_ZONE_DEG = 1.0  # dead-zone forms: total width (one; the report says the width is the form's, not estimated)
 
 
+def _rigid_in_own_parameters(r, drive_forms):
+    """Whether screened entry ``r`` is a rigid form in the layout's parameters, the kind
+    a drive form is measured against: not a drive form, not a line drawn within the
+    data sheet's tolerances (:func:`_tolerance_lines`)."""
+    return r.get("form") not in drive_forms and not r.get("tolerance_line")
+
+
 def _shaft_clears(entries, drive_forms):
     """``entries`` (screened results with the same sources) without the drive forms
     (shafts, dead zones) that do not fit :data:`SHAFT_MARGIN` better than the best rigid
@@ -134,8 +141,7 @@ def _shaft_clears(entries, drive_forms):
     parameters' best rigid set, 0.890, and the line was then refused for lc9)."""
     def sc(r):
         return r.get("score", r.get("predicted_score", math.inf))
-    rigid = min((sc(r) for r in entries if r.get("form") not in drive_forms and not r.get("tolerance_line")),
-                default=math.inf)
+    rigid = min((sc(r) for r in entries if _rigid_in_own_parameters(r, drive_forms)), default=math.inf)
     return [r for r in entries if r.get("form") not in drive_forms or sc(r) <= (1.0 - SHAFT_MARGIN) * rigid]
 
 
@@ -225,12 +231,14 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
         # a swap has no run in the layout's form: then against the best rigid form holding the
         # same sources (independent seed-8 c24: a dead-zone form with idler_r1 in idler_u1's place
         # read "explains -14 %" against the full set)
-        same_set = [r for r in scored if r.get("form") not in drive_forms
+        same_set = [r for r in scored if _rigid_in_own_parameters(r, drive_forms)
                     and r.get("without") == chosen["without"] and r.get("swap") == chosen.get("swap")]
         cur_score = next((r["score"] for r in same_set if r.get("form") == "as modelled"),
                          min((r["score"] for r in same_set), default=cur_score))
+    # in the drive form's own parameters, as it cleared them (_shaft_clears): against a line
+    # within the tolerances seed-8 c24's dead zone read "explains -8 %", confidence 0
     rigid = [r["score"] for r in scored
-             if r.get("form") not in drive_forms and ("without" in r) == ("without" in chosen)]
+             if _rigid_in_own_parameters(r, drive_forms) and ("without" in r) == ("without" in chosen)]
     nxt = min(rigid) if rigid else cur_score
     same = sorted({r["form"] for r in scored if r.get("form") in drive_forms and r["form"] != chosen["form"]
                    and r["score"] <= chosen["score"] + AS_WELL * max(cur_score - chosen["score"], 1e-12)})

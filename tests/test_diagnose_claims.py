@@ -492,6 +492,14 @@ def test_a_drive_form_competes_with_the_rigid_forms_in_its_own_parameters():
                {"form": "feedforward none + load-cell filter order 2 + line 9 within the data sheet",
                 "score": 0.649, "without": w, "swap": swap, "tolerance_line": {"draw": 9, "of": 12, "set": {}}}]
     assert structure.drive_forms_cleared(entries, forms) == entries
+    # what the report says of it is measured against the same rigid set: it explains 21 %
+    # of that set's sum, not -8 % against the line
+    chosen = {**entries[1], "name": f"{dz}, idler_r1 in the place of idler_u1, without roller19",
+              "check": {"accepted": True}}
+    eff = structure._drive_effect(chosen, forms, entries, 0.584)
+    assert eff["element"] == "sw_leader" and eff["kind"] == "backlash"
+    assert eff["explained_share"] == pytest.approx(1.0 - 0.699 / 0.890) and \
+        eff["confidence"] == pytest.approx(1.0 - 0.699 / 0.890), eff
     # the same score as a form in the layout's parameters would unseat it
     entries[2].pop("tolerance_line")
     assert entries[1] not in structure.drive_forms_cleared(entries, forms)
