@@ -456,6 +456,32 @@ def test_a_shaft_form_with_another_member_of_a_tie_competes_with_every_members_r
     assert entries[4] in structure.drive_forms_cleared(entries, shafts)
 
 
+def test_the_html_report_shows_the_checks_refusals_before_the_forms_only_predicted():
+    """report.rejected_for_reading: independent seed-34 c04's 150 rejected rows began with
+    102 model forms only predicted; the HTML table (40 rows) never reached the periodic
+    screen. The checks' refusals come first, then the screens' in their order, the
+    predicted-only forms are counted, not listed, and what the limit cuts is counted."""
+    from webline.diagnosis.report import rejected_for_reading
+
+    def row(stage, element, reason="x"):
+        return {"element": element, "kind": "k", "stage": stage, "reason": reason}
+
+    rej = ([row("structure screen", f"form {i}", "predicted sum of NRMSE^2 1.2, not simulated: ...")
+            for i in range(50)]
+           + [row("structure screen", "feedforward none", "sum of NRMSE^2 0.6 vs 0.5 (chosen)"),
+              row("other-effects screen", "EA"), row("periodic screen step 2", "roller9"),
+              row("periodic screen step 1", "sw_leader"), row("backlash screen", "sw_leader"),
+              row("refine check", "idler_u1"), row("a stage of its own", "z")])
+    rows, unsimulated, more = rejected_for_reading(rej)
+    assert unsimulated == 50 and more == 0
+    assert [r["element"] for r in rows] == ["idler_u1", "sw_leader", "roller9", "sw_leader", "EA", "z",
+                                            "feedforward none"]
+    assert [r["stage"] for r in rows][1:4] == ["backlash screen", "periodic screen step 2",
+                                               "periodic screen step 1"]
+    rows, unsimulated, more = rejected_for_reading(rej, limit=3)
+    assert len(rows) == 3 and more == 4 and rows[0]["stage"] == "refine check"
+
+
 def test_a_held_out_sensor_fit_worse_is_named_in_the_verdict():
     """report.held_out_worse: a held-out sensor whose refined NRMSE is above the nominal
     one is named with both values (independent seed-34 c02's lc19); one fit better or
