@@ -591,11 +591,11 @@ def rejected_for_reading(rejected, limit=REJECTED_ROWS):
             if st == name or st.startswith(name + " "):
                 return i
         return len(REJECTED_ORDER) - 1.5
-    unsimulated = [r for r in rejected if r.get("stage") == "structure screen"
-                   and "not simulated" in str(r.get("reason", ""))]
-    rest = [r for r in rejected if not any(r is u for u in unsimulated)]
-    rows = sorted(rest, key=rank)   # stable: each stage keeps its own order
-    return rows[:limit], len(unsimulated), max(0, len(rows) - limit)
+    def predicted_only(r):   # structure.screen's row for a form it did not simulate
+        return r.get("stage") == "structure screen" and "predicted_nrmse" in r
+    n_predicted = sum(1 for r in rejected if predicted_only(r))
+    rows = sorted((r for r in rejected if not predicted_only(r)), key=rank)   # stable: a stage keeps its order
+    return rows[:limit], n_predicted, max(0, len(rows) - limit)
 
 
 def _runner_up_note(e):

@@ -466,8 +466,8 @@ def test_the_html_report_shows_the_checks_refusals_before_the_forms_only_predict
     def row(stage, element, reason="x"):
         return {"element": element, "kind": "k", "stage": stage, "reason": reason}
 
-    rej = ([row("structure screen", f"form {i}", "predicted sum of NRMSE^2 1.2, not simulated: ...")
-            for i in range(50)]
+    rej = ([{**row("structure screen", f"form {i}", "predicted sum of NRMSE^2 1.2, not simulated: ..."),
+             "predicted_nrmse": {"lc9.T": 1.1}} for i in range(50)]
            + [row("structure screen", "feedforward none", "sum of NRMSE^2 0.6 vs 0.5 (chosen)"),
               row("other-effects screen", "EA"), row("periodic screen step 2", "roller9"),
               row("periodic screen step 1", "sw_leader"), row("backlash screen", "sw_leader"),
