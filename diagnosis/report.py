@@ -483,7 +483,10 @@ def _verdict(rep):
         extra += f" Model form: {st['chosen']}."
     for r in rep.get("rejected") or []:
         if r.get("stage") == "parsimony (structure screen)":
-            extra += f" Not a second source: {r['kind']} of {r['element']} ({r['reason'].split(':')[0]})."
+            if r.get("or_instead"):   # structure.stands_in: two accounts of one line, not told apart
+                extra += f" Or a second source: {r['kind']} of {r['element']} ({r['or_instead']})."
+            else:
+                extra += f" Not a second source: {r['kind']} of {r['element']} ({r['reason'].split(':')[0]})."
     extra += "".join(f" {t}." for t in held_out_left(rep)[:2])
     extra += "".join(f" {t}." for t in held_out_worse(rep))
     if not effs and st.get("chosen") and st["chosen"] != "as modelled":

@@ -531,6 +531,43 @@ def test_a_drive_form_competes_with_the_rigid_forms_in_its_own_parameters():
     assert entries[1] not in structure.drive_forms_cleared(entries, forms)
 
 
+def test_a_drive_form_standing_in_for_a_source_that_fits_better_is_named_as_the_alternative():
+    """structure.stands_in, on independent seed-36 c17's measured sums of NRMSE^2 (idler_u1
+    and roller19 eccentric at 3.61 Hz, one fit run): the leader shaft at 5.41 Hz without
+    idler_r1 (roller19's tie) scored 0.5416, the full set in the rigid 'feedforward none + web
+    damping 2 ms' 0.5293. The report keeps the shaft (the swap rule allows it) but names the
+    second source as the other account, and the run that would tell them apart; a full set in
+    a drive form of its own, or a drive form that fits better, is no such pair."""
+    from webline.diagnosis import structure
+    from webline.diagnosis.report import _verdict
+
+    sh = "feedforward none + web damping 2 ms + shaft on sw_leader at 5.41 Hz"
+    forms = {sh: ("sw_leader", "compliance", 5.41)}
+    full = {"name": "feedforward none + web damping 2 ms", "form": "feedforward none + web damping 2 ms",
+            "score": 0.5293}
+    r = {"name": f"{sh}, without idler_r1", "form": sh, "score": 0.5416, "without": ["idler_r1"]}
+    why = structure.stands_in(r, full, forms, [3.607, 3.6075])
+    assert why and "idler_r1" in why and "0.5293 against 0.5416" in why and "shaft in sw_leader's drive" in why
+    assert "one frequency" in why and "3.61 Hz" in why and "another line speed" in why, why
+    # a ramped fit run: its steady windows at two speeds
+    two = structure.stands_in(r, full, forms, [2.74, 3.607])
+    assert "one frequency" not in two and "2.74, 3.61 Hz" in two and "more line speeds" in two, two
+    assert structure.stands_in({**r, "score": 0.5200}, full, forms) is None          # the drive form fits better
+    assert structure.stands_in(r, {**full, "form": sh}, forms) is None               # the full set holds the shaft
+    assert structure.stands_in({**r, "without": []}, full, forms) is None            # no source dropped
+    assert structure.stands_in({**r, "form": "feedforward none"}, full, forms) is None   # a rigid form
+    dz = {"feedforward none + dead zone on sw_leader": ("sw_leader", "backlash", 1.0)}
+    assert "dead zone" in structure.stands_in({**r, "form": "feedforward none + dead zone on sw_leader"}, full, dz)
+    # the verdict: "Or a second source" with the reason, not "Not a second source"
+    row = {"element": "idler_r1", "kind": "eccentricity", "stage": "parsimony (structure screen)",
+           "reason": f"explained by {sh} transmitting idler_u1's line: ...", "or_instead": why}
+    rep = {"effects": [], "gap": {}, "rejected": [row], "structure": {"chosen": sh}}
+    v = _verdict(rep)
+    assert "Or a second source: eccentricity of idler_r1 (the set with idler_r1" in v and "Not a second" not in v, v
+    row.pop("or_instead")
+    assert "Not a second source: eccentricity of idler_r1 (explained by" in _verdict(rep)
+
+
 def _weak_roll_beside_strong_idler(rescale=True):
     fs, n = 100.0, 6000
     t = np.arange(n) / fs
