@@ -1292,7 +1292,8 @@ def stands_in(r, full, drive_forms, f_hz=()):
     87 % of idler_u1's order 2 on lc19. The same holds for true drive effects with a
     phantom (seed-8 c24's dead zone, 0.699 against 0.584; seed-4 c05's shaft, 0.349
     against 0.341): the scores do not tell them apart, a run at another speed does.
-    ``f_hz``: the primary's fundamental in each fit run. Returns a sentence, or None."""
+    ``f_hz``: the primary's fundamental in each steady window of the fit runs
+    (:func:`_steady_frequencies`). Returns a sentence, or None."""
     dv = drive_forms.get(r.get("form"))
     if dv is None or not r.get("without") or full.get("form") in drive_forms or r["score"] <= full["score"]:
         return None
@@ -1307,7 +1308,8 @@ def stands_in(r, full, drive_forms, f_hz=()):
             f"{dv[0]}'s drive and a second source pass the line to the other zone alike {at}; "
             + ("a fit run at another line speed would tell them apart" if one else
                "fit runs at more line speeds would test it")
-            + f" (the {what}'s transfer changes with the line's frequency, a run-out does not)")
+            + f" (the {what}'s transfer changes with the line's frequency"
+            + (" and the torque's swing" if dv[1] == "backlash" else "") + ", a run-out does not)")
 
 
 def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms):

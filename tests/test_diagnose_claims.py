@@ -557,7 +557,8 @@ def test_a_drive_form_standing_in_for_a_source_that_fits_better_is_named_as_the_
     assert structure.stands_in({**r, "without": []}, full, forms) is None            # no source dropped
     assert structure.stands_in({**r, "form": "feedforward none"}, full, forms) is None   # a rigid form
     dz = {"feedforward none + dead zone on sw_leader": ("sw_leader", "backlash", 1.0)}
-    assert "dead zone" in structure.stands_in({**r, "form": "feedforward none + dead zone on sw_leader"}, full, dz)
+    got = structure.stands_in({**r, "form": "feedforward none + dead zone on sw_leader"}, full, dz)
+    assert "dead zone in sw_leader's drive" in got and "torque's swing" in got, got
     # the verdict: "Or a second source" with the reason, not "Not a second source"
     row = {"element": "idler_r1", "kind": "eccentricity", "stage": "parsimony (structure screen)",
            "reason": f"explained by {sh} transmitting idler_u1's line: ...", "or_instead": why}
