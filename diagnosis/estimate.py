@@ -37,6 +37,12 @@ def split_slow_periodic(y, fs, fc):
 
 
 # ---------------------------------------------------------------- harmonics ----
+def mean_frequency(t, theta, idx):
+    """The mean rotation frequency (Hz) of the angle ``theta`` (rad) over the samples
+    ``idx`` (at least two) of the time base ``t`` (s)."""
+    return float(abs(theta[idx[-1]] - theta[idx[0]]) / (2 * math.pi) / max(t[idx[-1]] - t[idx[0]], 1e-9))
+
+
 def harmonic_basis(theta, orders):
     """Columns sin(j theta), cos(j theta) for every order j (N x 2H).
 

@@ -377,11 +377,8 @@ class Diagnosis:
         return th, "model"
 
     def _mean_freq(self, c, th):
-        m = c.mask
-        if m.sum() < 2:
-            return 0.0
-        tt, a = c.t[m], th[m]
-        return float(abs(a[-1] - a[0]) / (2 * math.pi) / max(tt[-1] - tt[0], 1e-9))
+        idx = np.flatnonzero(c.mask)
+        return est.mean_frequency(c.t, th, idx) if len(idx) >= 2 else 0.0
 
     # --------------------------------------------------------------- 3 where ----
     def where(self):
@@ -480,7 +477,7 @@ class Diagnosis:
                 Y = est.fit_harmonics(resid[s][idx], th[idx], orders)
                 sig[idx] = est.harmonic_signal(th[idx], Y, orders)
                 T = len(idx) / c.fs
-                f = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi) / max(c.t[idx[-1]] - c.t[idx[0]], 1e-9)
+                f = est.mean_frequency(c.t, th, idx)
                 z = est.harmonic_z(Y, np.array(orders) * f, c.floors[s], T)
                 out["z"] += float(np.sum(z))
                 out["n"] += len(orders)

@@ -1271,11 +1271,7 @@ def _steady_frequencies(d, cand):
         if not d.orders_for(c, cand.key):
             continue
         th = c.theta[cand.key]
-        for idx in d._fit_pieces(c, th):
-            dt = c.t[idx[-1]] - c.t[idx[0]]
-            if dt > 0:
-                f = abs(th[idx[-1]] - th[idx[0]]) / (2 * math.pi) / dt
-                out.add(float(f"{f:.3g}"))
+        out.update(float(f"{est.mean_frequency(c.t, th, idx):.3g}") for idx in d._fit_pieces(c, th) if len(idx) > 1)
     return sorted(out)
 
 
@@ -1369,8 +1365,8 @@ def _parsimony(d, full, pars, effs, sec, e_cur, cur_nr, drive_forms):
             f"({full['name']}, with {', '.join(r['without'])}); {per}")
     r["check"] = {"accepted": True, "reason": text, "local_before": e_cur, "local_after": e_r}
     dropped = {fe["ranked"][0]["cand"].element: (fe, p) for fe, p in sec}
-    prim = next((fe["ranked"][0]["cand"] for fe in d.final_effects
-                 if fe["ranked"][0]["cand"].element in {p for _, p in sec}), None)
+    prims = {p for _, p in sec}
+    prim = next((cand for cand, _, _ in effs if cand.element in prims), None)
     alt = stands_in(r, full, drive_forms, _steady_frequencies(d, prim) if prim is not None else ())
     if alt:
         r["stands_in"] = alt
