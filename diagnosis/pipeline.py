@@ -960,7 +960,7 @@ class Diagnosis:
                          for j in range(1, len(X) + 1) if not keep[j - 1] and abs(X[j - 1]) > 0}
                 X = np.where(keep, X, 0.0)
                 ranked.append({"score": d, "cand": k, "G": G, "M": M, "W": W, "X": X, "misfit": misfit,
-                               "below_noise": below})
+                               "below_noise": below, "kept": [j for j in range(1, len(X) + 1) if keep[j - 1]]})
             if not ranked:
                 continue
             # best pattern fit first; ties (one sensor: every element fits exactly) go to

@@ -249,23 +249,28 @@ def _harmonics(b, X):
 
 
 def _left_out(b, X, listed):
-    """Orders the data show on the element's angle (the family screen's z above
-    ``estimate.ORDER_SHOWN_Z`` per fit run, the first estimate's rule) that the estimate left at zero (the time-domain fit
+    """Orders the first estimate kept (the data show them on the element's angle: the
+    family screen's z above ``estimate.ORDER_SHOWN_Z`` per fit run, or 2 % of the
+    line's measured energy, ``kept``) that the estimate left at zero (the time-domain fit
     found them not significant against the noise near their frequency, or harmful):
     listed with the per-order gain estimate and ``identifiable: false``; "not in the
     model" is not "zero" (independent seed-2 c08: the unwind's dominant order 1, 0.053
     mm, z 22 over two fit runs at 1.05-1.57 Hz among the line's slow modes, was missing
-    from the report)."""
+    from the report; seed-37 c08: its order 1, 0.064 mm, z 12 over two fit runs at 0.47
+    and 0.94 Hz, kept for its energy, was missing too)."""
     sc = b.get("score") or {}
     runs = max(1, len(sc.get("fits") or {}))
-    shown = [(int(j), float(z)) for j, z in (sc.get("z_order") or {}).items() if float(z) > est.ORDER_SHOWN_Z * runs]
-    strong = [(j, z) for j, z in shown if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
+    z_of = {int(j): float(z) for j, z in (sc.get("z_order") or {}).items()}
+    kept = set(b.get("kept") or ()) | {j for j, z in z_of.items() if z > est.ORDER_SHOWN_Z * runs}
+    strong = [(j, z_of.get(j, 0.0)) for j in sorted(kept) if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
     if not strong or b.get("G") is None or b.get("M") is None:
         return []
     x_all, _ = est.solve_fourier(b["M"], b["G"], b["W"])
     return [{"order": j, "amplitude": float(abs(x_all[j - 1])), "phase": float(np.angle(x_all[j - 1])),
              "sigma": None, "identifiable": False, "in_refined_layout": False, "left_out": True,
-             "why": (f"the data show order {j} on the element's angle (z = {z:.0f} over {runs} fit run(s)) but "
+             "why": (f"the data show order {j} on the element's angle (z = {z:.0f} over {runs} fit run(s)"
+                     + ("" if z > est.ORDER_SHOWN_Z * runs else ", 2 % or more of the line's measured energy")
+                     + ") but "
                      f"the fit of the whole line left it out (not significant against the noise near its "
                      f"frequency, or harmful when simulated): the amplitude is the per-order gain estimate, "
                      f"not checked by simulation")}

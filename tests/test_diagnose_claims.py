@@ -385,6 +385,25 @@ def test_an_order_the_data_show_but_the_fit_left_out_is_listed_not_identifiable(
     assert "left_out" not in h[3]
 
 
+def test_an_order_the_first_estimate_kept_for_its_energy_is_listed_when_the_fit_left_it_out():
+    """Independent seed-37 c08: the unwind's dominant order 1 (0.064 mm) had z 12 over two
+    fit runs, below the z rule, and was kept by the first estimate for its share of the
+    line's measured energy; the time-domain fit left it at zero and the report listed
+    orders 3-6 only. What the first estimate kept is listed when the fit leaves it out,
+    whatever its z; a weak order it did not keep is not."""
+    from webline.diagnosis.report import _harmonics
+    G = np.array([[1.0 + 0.2j, 0.5, 0.3j], [0.4, 0.2 - 0.1j, 0.1]])
+    Xt = np.array([5e-5 * np.exp(1.1j), 1e-6, 4e-5])
+    X = np.array([0.0, 0.0, 4e-5], complex)
+    b = {"X": X, "G": G, "M": G * Xt[None, :], "W": np.ones(2), "kept": [1, 3],
+         "score": {"fits": {"run1": {}, "run2": {}}, "z_order": {1: 12.0, 2: 12.0, 3: 900.0}}}
+    h = {x["order"]: x for x in _harmonics(b, X)}
+    assert sorted(h) == [1, 3]
+    assert h[1]["left_out"] and h[1]["identifiable"] is False and h[1]["in_refined_layout"] is False
+    assert h[1]["amplitude"] == pytest.approx(5e-5, rel=1e-9)
+    assert "z = 12 over 2 fit run(s)" in h[1]["why"]
+
+
 def test_a_form_that_gives_up_anything_must_gain_one_percent():
     """Seed-4 c08 of the independent family: "feedforward reference" against the
     layout's own form lowered lc19 from 1.0046 to 0.9989 and raised lc9 from 1.0098
