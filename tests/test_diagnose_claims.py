@@ -574,7 +574,10 @@ def test_a_drive_form_standing_in_for_a_source_that_fits_better_is_named_as_the_
     assert structure.stands_in({**r, "score": 0.5200}, full, forms) is None          # the drive form fits better
     assert structure.stands_in(r, {**full, "form": sh}, forms) is None               # the full set holds the shaft
     assert structure.stands_in({**r, "without": []}, full, forms) is None            # no source dropped
-    assert structure.stands_in({**r, "form": "feedforward none"}, full, forms) is None   # a rigid form
+    assert structure.stands_in({**r, "form": "feedforward none"}, full, forms) is None   # a rigid form within 10 %
+    # seed-37 c17: the rigid one-source form 1.56 x the full set's sum (the real idler_u1 dropped)
+    rig = structure.stands_in({**r, "form": "feedforward none", "score": 1.56 * 0.5293}, full, forms, [3.469])
+    assert rig and "56 % more without it" in rig and "form 'feedforward none'" in rig and "another line speed" in rig, rig
     dz = {"feedforward none + dead zone on sw_leader": ("sw_leader", "backlash", 1.0)}
     got = structure.stands_in({**r, "form": "feedforward none + dead zone on sw_leader"}, full, dz)
     assert "dead zone in sw_leader's drive" in got and "torque's swing" in got, got
