@@ -261,7 +261,8 @@ def _left_out(b, X, listed):
     sc = b.get("score") or {}
     runs = max(1, len(sc.get("fits") or {}))
     z_of = {int(j): float(z) for j, z in (sc.get("z_order") or {}).items()}
-    kept = set(b.get("kept") or ()) | {j for j, z in z_of.items() if z > est.ORDER_SHOWN_Z * runs}
+    by_z = {j for j, z in z_of.items() if z > est.ORDER_SHOWN_Z * runs}
+    kept = set(b.get("kept") or ()) | by_z
     strong = [(j, z_of.get(j, 0.0)) for j in sorted(kept) if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
     if not strong or b.get("G") is None or b.get("M") is None:
         return []
@@ -269,7 +270,7 @@ def _left_out(b, X, listed):
     return [{"order": j, "amplitude": float(abs(x_all[j - 1])), "phase": float(np.angle(x_all[j - 1])),
              "sigma": None, "identifiable": False, "in_refined_layout": False, "left_out": True,
              "why": (f"the data show order {j} on the element's angle (z = {z:.0f} over {runs} fit run(s)"
-                     + ("" if z > est.ORDER_SHOWN_Z * runs else ", 2 % or more of the line's measured energy")
+                     + ("" if j in by_z else ", 2 % or more of the line's measured energy")
                      + ") but "
                      f"the fit of the whole line left it out (not significant against the noise near its "
                      f"frequency, or harmful when simulated): the amplitude is the per-order gain estimate, "
