@@ -590,6 +590,7 @@ def screen(d):
             entry["without"] = list(sec_els)
         if swap:
             entry["swap"] = {"replaced": swap[0], "by": swap[1]}
+            entry["_use"] = use   # the swapped set itself, for the tolerance lines (not reported)
         d.structure["screened"].append(entry)
         try:
             alt0 = _apply(zero, sets)
@@ -787,10 +788,8 @@ def screen(d):
         variants = [(effs_p, None)]
         sw = min((x[0] for x in pars_a if "swap" in x[0] and x[0]["form"] == f_best.get("form")),
                  key=lambda e: e["predicted_score"], default=None)
-        use = next((u for old, new, u in swaps if sw is not None
-                    and (old, new) == (sw["swap"]["replaced"], sw["swap"]["by"])), None)
-        if use is not None:
-            variants.append((use, (sw["swap"]["replaced"], sw["swap"]["by"])))
+        if sw is not None:
+            variants.append((sw["_use"], (sw["swap"]["replaced"], sw["swap"]["by"])))
         _tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, to_b)
     # the drive forms in that form too, each simulated: a shaft passes the lines between the
     # zones in the form the line has, and the linear prediction ranks such combinations no
@@ -964,7 +963,7 @@ def screen(d):
     for r in d.structure["screened"]:
         if "X" in r:
             r["harmonics_amplitude_m"] = {el: [float(abs(x)) for x in X] for el, X in r["X"].items()}
-        for k in ("doc", "sims", "X", "_nom"):
+        for k in ("doc", "sims", "X", "_nom", "_use"):
             r.pop(k, None)
 
 
