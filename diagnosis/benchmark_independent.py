@@ -625,6 +625,9 @@ def case_targets(truth, report, score=None):
               "found": any(m["kind"] == t["kind"] and m["element"] == t["element"] for m in kept)}
              for t in truth["effects"]]
     drive = [f for f in found if f["kind"] in B.DRIVE_KINDS]
+    for f, t in zip(found, truth["effects"]):
+        if f["kind"] == "compliance" and f["found"]:
+            f["mode"] = shaft_mode(t, reported)
     # shafts the report names as possible but does not claim (compliance.refused): not a find,
     # counted beside the recall, with those on a drive that has no hidden shaft
     named = [f for f in (report or {}).get("findings") or [] if f.get("kind") == "possible drive shaft"]
@@ -648,6 +651,19 @@ def case_targets(truth, report, score=None):
         "possible_shafts": {"named": len(possible), "on_a_hidden_shaft": sum(e in shafts for e in possible),
                             "held_out_lower": sum(_held_out_lower(f.get("holdout")) for f in named)},
     }
+
+
+def shaft_mode(t, reported):
+    """A found shaft's torsional mode against the truth's: {"true_hz", "estimated_hz", "range_hz",
+    "rel_error", "in_range"} (the range as the report gives it, the estimate alone without one)."""
+    eff = next((e for e in reported if e.get("element") == t["element"] and e.get("kind") == "compliance"), {})
+    tf = (eff.get("parameters") or {}).get("torsional_frequency") or {}
+    f_true, f_est = (t.get("drive") or {}).get("torsional_hz"), tf.get("estimated")
+    if f_true is None or f_est is None:
+        return None
+    lo, hi = tf.get("range") or (f_est, f_est)
+    return {"true_hz": f_true, "estimated_hz": f_est, "range_hz": [lo, hi],
+            "rel_error": abs(f_est - f_true) / f_true, "in_range": bool(lo <= f_true <= hi)}
 
 
 def _held_out_lower(h):
@@ -678,6 +694,7 @@ def target_scores(results):
     drive = {"true": 0, "matched": 0, "detectable": 0, "matched_detectable": 0, "unknown": 0}
     every = dict(drive)
     possible = {"named": 0, "on_a_hidden_shaft": 0, "held_out_lower": 0}
+    modes = []
     for res in results:
         tr, rep = res["truth"], res.get("report")
         if rep is None:
@@ -705,6 +722,7 @@ def target_scores(results):
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
         for k in possible:
             possible[k] += c["possible_shafts"][k]
+        modes += [{"id": tr["id"], "element": dv["element"], **dv["mode"]} for dv in c["effects"] if dv.get("mode")]
         for dv in c["effects"]:
             for d in (every, drive) if dv["kind"] in B.DRIVE_KINDS else (every,):
                 d["true"] += 1
@@ -739,7 +757,9 @@ def target_scores(results):
         # and over those the data can show at all (B.effect_detectable; unknown ones left out)
         "drive": {**drive, "recall": B._ratio(drive["matched"], drive["true"]),
                   "recall_detectable": B._ratio(drive["matched_detectable"], drive["detectable"]),
-                  "possible_shafts": possible},
+                  "possible_shafts": possible,
+                  "shaft_modes": {"n": len(modes), "in_range": sum(m["in_range"] for m in modes),
+                                  "rel_errors": B._stats([m["rel_error"] for m in modes]), "found": modes}},
         # the same over every hidden effect: what a method could reach on these data
         "detectable": {**every, "recall": B._ratio(every["matched"], every["true"]),
                        "recall_detectable": B._ratio(every["matched_detectable"], every["detectable"])},
@@ -800,7 +820,8 @@ def target_rows(s):
         ("recall over the hidden effects the data can show (each measured: truth with and without it)",
          _recall_cell(s.get("detectable") or {}), "-", "detectable_recall"),
         ("drive effects (backlash, compliance): recall over all hidden / over the detectable only",
-         _recall_cell(s.get("drive") or {}) + _possible_cell((s.get("drive") or {}).get("possible_shafts")),
+         _recall_cell(s.get("drive") or {}) + _possible_cell((s.get("drive") or {}).get("possible_shafts"))
+         + _modes_cell((s.get("drive") or {}).get("shaft_modes")),
          "-", "drive_recall"),
         ("periodic sources invented on noise-only records",
          f"{no['invented_periodic']} in {no['records']} records ({no['ramped_records']} ramped) of {no['cases']} cases"
@@ -815,6 +836,14 @@ def _possible_cell(p):
         return ""
     return (f"; {p['named']} shaft(s) named possible, not claimed ({p['on_a_hidden_shaft']} on a hidden shaft; "
             f"{p['held_out_lower']} lowering every sensor's NRMSE on the held-out runs)")
+
+
+def _modes_cell(m):
+    """'; found shafts' modes: median error x %, the truth inside the reported range in k/n', or ''."""
+    if not m or not m.get("n"):
+        return ""
+    return (f"; found shafts' torsional modes: median error {B._pct2(m['rel_errors']['median'])}, "
+            f"the truth inside the reported range {m['in_range']}/{m['n']}")
 
 
 def _recall_cell(d):

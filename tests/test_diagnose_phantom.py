@@ -226,6 +226,33 @@ def test_a_shaft_form_chosen_with_a_source_fewer_is_measured_against_that_set():
     assert eff["kind"] == "compliance" and eff["fundamental_hz"] == 6.37
 
 
+def test_a_shaft_form_carries_the_modes_of_the_shafts_on_its_drive_that_fit_about_as_well():
+    """The torsional mode of a chosen shaft form is the grid's; the shafts on the same drive
+    that fit about as well (within AS_WELL of the best improvement, in any form) give its
+    range, a shaft on another drive or a dead zone does not."""
+    from webline.diagnosis import structure
+    forms = {"shaft on sw_leader at 6.37 Hz": ("sw_leader", "compliance", 6.37),
+             "feedforward reference + shaft on sw_leader at 9.55 Hz": ("sw_leader", "compliance", 9.55),
+             "shaft on sw_leader at 12.7 Hz": ("sw_leader", "compliance", 12.7),
+             "shaft on sw_follower at 5.1 Hz": ("sw_follower", "compliance", 5.1),
+             "feedforward none + dead zone on sw_leader": ("sw_leader", "backlash", 1.0)}
+    rigid = {"name": "feedforward none", "form": "feedforward none", "score": 0.50}
+    chosen = {"name": "shaft on sw_leader at 6.37 Hz", "form": "shaft on sw_leader at 6.37 Hz", "score": 0.20}
+    # the layout's form 0.60: the best improvement 0.40, 'about as well' up to 0.24
+    near = {"name": "ff ref 9.55", "form": "feedforward reference + shaft on sw_leader at 9.55 Hz", "score": 0.239}
+    far = {"name": "12.7", "form": "shaft on sw_leader at 12.7 Hz", "score": 0.241}
+    other = [{"name": "f", "form": "shaft on sw_follower at 5.1 Hz", "score": 0.21},
+             {"name": "dz", "form": "feedforward none + dead zone on sw_leader", "score": 0.205}]
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, near, far] + other, 0.60)
+    tf = eff["parameters"]["torsional_frequency"]
+    assert tf["estimated"] == 6.37 and tf["range"] == [6.37, 9.55]
+    assert "6.37-9.55 Hz fit about as well" in eff["detail"]
+    # alone on its drive: a range of one mode, and the detail says nothing of a spread
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, far] + other, 0.60)
+    assert eff["parameters"]["torsional_frequency"]["range"] == [6.37, 6.37]
+    assert "fit about as well)" not in eff["detail"]
+
+
 def test_a_dead_zone_form_is_reported_as_a_backlash_of_its_width():
     """A chosen dead-zone form claims a backlash (no fundamental), its width the form's,
     said not to be estimated, measured against the best rigid form as a shaft is."""

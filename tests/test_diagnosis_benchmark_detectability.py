@@ -326,3 +326,29 @@ def test_rescore_measures_detectability_of_cases_made_before(tmp_path):
                                                                            rel=1e-9)
     ts = json.loads(out.read_text())["families"]["independent"]["target_scores"]
     assert ts["drive"]["true"] == 1 and ts["drive"]["unknown"] == 0
+
+
+def test_a_found_shafts_mode_is_scored_against_the_truths_with_its_range():
+    """A found compliance carries its torsional mode and the range of the shafts that fit
+    about as well; the benchmark says how far the mode is from the truth's and whether the
+    truth lies inside that range (a mode the reported range misses is said so, not hidden)."""
+    t = {"kind": "compliance", "element": "sw_leader", "drive": {"torsional_hz": 13.56},
+         "detectable": {"detectable": True, "detect_value": 122.0}}
+    within = {"element": "sw_leader", "kind": "compliance",
+              "parameters": {"torsional_frequency": {"estimated": 10.9, "unit": "Hz", "range": [10.9, 14.75]}}}
+    m = BI.shaft_mode(t, [within])
+    assert m["in_range"] and m["range_hz"] == [10.9, 14.75]
+    assert m["rel_error"] == pytest.approx((13.56 - 10.9) / 13.56, rel=1e-12)
+    # no range given: the estimate alone, which misses the truth
+    alone = {"element": "sw_leader", "kind": "compliance",
+             "parameters": {"torsional_frequency": {"estimated": 10.9, "unit": "Hz"}}}
+    assert BI.shaft_mode(t, [alone])["in_range"] is False
+    assert BI.shaft_mode(t, [dict(alone, element="rewind")]) is None
+    truth = {"id": "x", "effects": [t], "runs": [{"name": "run1", "holdout": False}]}
+    s = BI.target_scores([{"truth": truth, "report": {"effects": [within]}},
+                          {"truth": dict(truth, id="y"), "report": {"effects": [alone]}}])
+    sm = s["drive"]["shaft_modes"]
+    assert sm["n"] == 2 and sm["in_range"] == 1 and [f["id"] for f in sm["found"]] == ["x", "y"]
+    row = next(r for r in BI.target_rows(s) if r[3] == "drive_recall")
+    assert row[1].endswith("; found shafts' torsional modes: median error 20 %, the truth inside the "
+                           "reported range 1/2")
