@@ -654,11 +654,14 @@ def case_targets(truth, report, score=None):
 
 
 def shaft_mode(t, reported):
-    """A found shaft's torsional mode against the truth's: {"true_hz", "estimated_hz", "range_hz",
-    "rel_error", "in_range"} (the range as the report gives it, the estimate alone without one)."""
+    """A found shaft's torsional mode against the truth's two-mass mode (``mode_hz``: a roll's
+    material on the load side, as the scorer's match measures it): {"true_hz", "estimated_hz",
+    "range_hz", "rel_error", "in_range"} (the range as the report gives it, the estimate alone
+    without one)."""
     eff = next((e for e in reported if e.get("element") == t["element"] and e.get("kind") == "compliance"), {})
     tf = (eff.get("parameters") or {}).get("torsional_frequency") or {}
-    f_true, f_est = (t.get("drive") or {}).get("torsional_hz"), tf.get("estimated")
+    dr = t.get("drive") or {}
+    f_true, f_est = dr.get("mode_hz") or dr.get("torsional_hz"), tf.get("estimated")
     if f_true is None or f_est is None:
         return None
     lo, hi = tf.get("range") or (f_est, f_est)

@@ -344,6 +344,9 @@ def test_a_found_shafts_mode_is_scored_against_the_truths_with_its_range():
              "parameters": {"torsional_frequency": {"estimated": 10.9, "unit": "Hz"}}}
     assert BI.shaft_mode(t, [alone])["in_range"] is False
     assert BI.shaft_mode(t, [dict(alone, element="rewind")]) is None
+    # a roll's material on the load side lowers its two-mass mode: that is the yardstick
+    roll = dict(t, drive={"torsional_hz": 9.54, "mode_hz": 8.72})
+    assert BI.shaft_mode(roll, [within])["true_hz"] == 8.72 and BI.shaft_mode(roll, [within])["in_range"] is False
     truth = {"id": "x", "effects": [t], "runs": [{"name": "run1", "holdout": False}]}
     s = BI.target_scores([{"truth": truth, "report": {"effects": [within]}},
                           {"truth": dict(truth, id="y"), "report": {"effects": [alone]}}])
