@@ -625,9 +625,6 @@ def case_targets(truth, report, score=None):
               "found": any(m["kind"] == t["kind"] and m["element"] == t["element"] for m in kept)}
              for t in truth["effects"]]
     drive = [f for f in found if f["kind"] in B.DRIVE_KINDS]
-    for f, t in zip(found, truth["effects"]):
-        if f["kind"] == "compliance" and f["found"]:
-            f["mode"] = shaft_mode(t, reported)
     # shafts the report names as possible but does not claim (compliance.refused): not a find,
     # counted beside the recall, with those on a drive that has no hidden shaft
     named = [f for f in (report or {}).get("findings") or [] if f.get("kind") == "possible drive shaft"]
@@ -648,25 +645,26 @@ def case_targets(truth, report, score=None):
         "invented_any": len(everything) if noise_only else 0,
         "drive": drive,
         "effects": found,
+        "shaft_modes": [x for x in (shaft_mode(m, reported) for m in kept if m["kind"] == "compliance") if x],
         "possible_shafts": {"named": len(possible), "on_a_hidden_shaft": sum(e in shafts for e in possible),
                             "held_out_lower": sum(_held_out_lower(f.get("holdout")) for f in named)},
     }
 
 
-def shaft_mode(t, reported):
-    """A found shaft's torsional mode against the truth's two-mass mode (``mode_hz``: a roll's
-    material on the load side, as the scorer's match measures it): {"true_hz", "estimated_hz",
-    "range_hz", "rel_error", "in_range"} (the range as the report gives it, the estimate alone
-    without one)."""
-    eff = next((e for e in reported if e.get("element") == t["element"] and e.get("kind") == "compliance"), {})
-    tf = (eff.get("parameters") or {}).get("torsional_frequency") or {}
-    dr = t.get("drive") or {}
-    f_true, f_est = dr.get("mode_hz") or dr.get("torsional_hz"), tf.get("estimated")
-    if f_true is None or f_est is None:
+def shaft_mode(m, reported):
+    """A found shaft's torsional mode against the truth's, from the scorer's match ``m``
+    (:func:`benchmark._match_detail`: the truth's two-mass mode, the reported one, the
+    error), with the range the report gives it: {"element", "true_hz", "estimated_hz",
+    "range_hz", "rel_error", "in_range"} (the estimate alone without a range), or None
+    without a mode."""
+    if m.get("torsional_rel_error") is None:
         return None
-    lo, hi = tf.get("range") or (f_est, f_est)
-    return {"true_hz": f_true, "estimated_hz": f_est, "range_hz": [lo, hi],
-            "rel_error": abs(f_est - f_true) / f_true, "in_range": bool(lo <= f_true <= hi)}
+    eff = next((e for e in reported if e.get("element") == m["reported_element"] and e.get("kind") == "compliance"),
+               {})
+    f_true, f_est = m["torsional_true_hz"], m["torsional_reported_hz"]
+    lo, hi = ((eff.get("parameters") or {}).get("torsional_frequency") or {}).get("range") or (f_est, f_est)
+    return {"element": m["element"], "true_hz": f_true, "estimated_hz": f_est, "range_hz": [lo, hi],
+            "rel_error": m["torsional_rel_error"], "in_range": bool(lo <= f_true <= hi)}
 
 
 def _held_out_lower(h):
@@ -725,7 +723,7 @@ def target_scores(results):
         amp += [{"id": tr["id"], **a} for a in c["amplitude"]]
         for k in possible:
             possible[k] += c["possible_shafts"][k]
-        modes += [{"id": tr["id"], "element": dv["element"], **dv["mode"]} for dv in c["effects"] if dv.get("mode")]
+        modes += [{"id": tr["id"], **m} for m in c["shaft_modes"]]
         for dv in c["effects"]:
             for d in (every, drive) if dv["kind"] in B.DRIVE_KINDS else (every,):
                 d["true"] += 1
