@@ -26,8 +26,10 @@ run: $(FMUS)
 	$(BIN)/webline run scenarios/ewl_out_of_round.yaml --out $(OUT) --csv
 	$(BIN)/webline plot $(OUT)
 
+# one worker a core, a test file per worker (its module fixtures stay whole): on a fresh
+# machine most of the suite is compiling the engine's generated code, one core each
 test: $(FMUS)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 bench: $(FMUS)
 	$(BIN)/python bench/run_bench.py

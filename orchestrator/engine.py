@@ -36,8 +36,8 @@ held from one output time to the next, as the co-simulation master holds it over
 
 API: :func:`compile_system` -> :class:`Compiled`; :func:`simulate` ->
 :class:`~orchestrator.results.Result` (columns ``<component>.<variable>``, meta kind
-``"engine"``); :func:`simulate_batch` for variants of one structure (numba
-``prange``, one variant per thread).
+``"engine"``); :func:`simulate_batch` for variants of one structure (one compiled
+``integrate``, which releases the GIL, a variant per thread).
 """
 import hashlib
 import importlib.util
@@ -46,6 +46,7 @@ import os
 import sys
 import time as _time
 import types
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -685,13 +686,6 @@ def integrate(x0, p, events, rows, shifts, h_target, nz_slot, nz_seed, nz_std, Y
         if c != 0:
             return c, e + 1
     return 0, ne - 1
-
-
-def integrate_batch(X0, P, events, rows, shifts, hs, nz_slot, nz_seed, nz_std, Ys, Xs, status, where):
-    for v in numba.prange(X0.shape[0]):
-        s, w = integrate(X0[v], P[v], events, rows, shifts, hs[v], nz_slot, nz_seed, nz_std, Ys[v], Xs[v])
-        status[v] = s
-        where[v] = w
 '''
 
 _MODULES = {}
@@ -745,9 +739,11 @@ def _load(source):
     # numba's disk cache needs a file it can stat; without one, compile in memory
     cache = path is not None
     sys.modules[name] = mod
-    for fname in ("evaluate", "check", "integrate"):
+    for fname in ("evaluate", "check"):
         setattr(mod, fname, numba.njit(cache=cache)(getattr(mod, fname)))
-    mod.integrate_batch = numba.njit(cache=cache, parallel=True)(mod.integrate_batch)
+    # nogil: a batch runs its variants on threads (_run_batch) instead of a parallel (parfor)
+    # copy of ``integrate``, whose compile cost a third of a new structure's
+    mod.integrate = numba.njit(cache=cache, nogil=True)(mod.integrate)
     _MODULES[source] = mod
     return mod
 
@@ -922,6 +918,23 @@ def simulate(system, t_eval=None, params=None, h=None, h_max=H_MAX, compiled=Non
     return res
 
 
+def _run_batch(module, X0, P, ev, rows, shifts, hs, slot, seed, std, Ys, Xs, status, where):
+    """``module.integrate`` for every variant, on up to one thread a core (numba's thread
+    count): ``integrate`` releases the GIL, each variant writes its own rows."""
+    def one(v):
+        status[v], where[v] = module.integrate(X0[v], P[v], ev, rows, shifts, float(hs[v]), slot, seed, std,
+                                               Ys[v], Xs[v])
+
+    import numba
+    workers = min(len(X0), max(1, int(numba.config.NUMBA_NUM_THREADS)))
+    if workers == 1:
+        for v in range(len(X0)):
+            one(v)
+        return
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        list(pool.map(one, range(len(X0))))
+
+
 def simulate_batch(systems, t_eval=None, h_max=H_MAX, compiled=None):
     """Run variants of one structure (equal generated code: same models, states, connections
     and options; any parameter values) in one compiled call, a variant per thread.
@@ -963,7 +976,7 @@ def simulate_batch(systems, t_eval=None, h_max=H_MAX, compiled=None):
     status, where = np.zeros(nv, dtype=np.int64), np.zeros(nv, dtype=np.int64)
     slot, seed, std = _noise_arrays(base)
     t_run = _time.perf_counter()
-    base.module.integrate_batch(X0, P, ev, rows, shifts, hs, slot, seed, std, Ys, Xs, status, where)
+    _run_batch(base.module, X0, P, ev, rows, shifts, hs, slot, seed, std, Ys, Xs, status, where)
     run_s = _time.perf_counter() - t_run
     wall = _time.perf_counter() - t_wall
     out = []
