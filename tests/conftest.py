@@ -9,6 +9,22 @@ def fmus():
     return build_all(log=lambda *a: None)
 
 
+# Files of whole diagnoses, each minutes on one core: collected first, so that the workers
+# (`make test` runs one a core, a file each) start on them and end on short files.
+FIRST = ("test_diagnose_claims.py", "test_diagnose_compliance.py", "test_diagnose_coherence_weights.py",
+         "test_diagnose_combined_forms.py", "test_diagnose_phantom.py", "test_diagnose.py",
+         "test_diagnose_regress.py")
+
+
+def pytest_collection_modifyitems(session, config, items):
+    def rank(item):
+        name = item.path.name
+        if item.get_closest_marker("slow"):
+            return 0
+        return 1 + FIRST.index(name) if name in FIRST else len(FIRST) + 1
+    items.sort(key=rank)  # stable: a file's tests keep their order
+
+
 # pythonfmu instances live inside the test process (fmpy, libcosim). On rare
 # runs the interpreter's own teardown after the last test aborted with
 # "corrupted double-linked list" (glibc, exit 134) although every test had

@@ -20,6 +20,7 @@ import pytest
 from records import REWIND_ZONE, UNWIND_ZONE, assert_no_sensor_worse, independent_cases
 
 SEED = 21
+pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: `make test-all`
 
 
 @pytest.fixture(scope="module")

@@ -16,6 +16,7 @@ import pytest
 from records import assert_no_sensor_worse, independent_cases
 
 SEED = 22
+pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: `make test-all`
 
 
 @pytest.fixture(scope="module")

@@ -16,6 +16,7 @@ import pytest
 from records import independent_cases
 
 SEED = 9
+pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: `make test-all`
 
 
 @pytest.fixture(scope="module")
