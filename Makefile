@@ -29,8 +29,9 @@ run: $(FMUS)
 # One worker a core, a test file per worker (its module fixtures stay whole). `make test`
 # (CI's command) leaves out the tests marked slow: whole blind diagnoses that on a fresh
 # machine, every engine structure compiled anew, hold the suite past CI's 90 minutes;
-# `make test-all` runs them too.
-PYTEST := $(BIN)/python -m pytest -n auto --dist loadfile
+# `make test-all` runs them too. Files go out in conftest's order (the long diagnoses
+# first), not xdist's default of the files with most tests first.
+PYTEST := $(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder
 
 test: $(FMUS)
 	$(PYTEST) -m "not slow"
