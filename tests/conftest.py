@@ -11,8 +11,9 @@ def fmus():
 
 # Files of whole diagnoses, each minutes on one core: collected first, so that the workers
 # (`make test` runs one a core, a file each) start on them and end on short files.
-FIRST = ("test_diagnose_claims.py", "test_diagnose_compliance.py", "test_diagnose_coherence_weights.py",
-         "test_diagnose_combined_forms.py", "test_diagnose_phantom.py", "test_diagnose.py",
+FIRST = ("test_diagnose_same_frequency.py", "test_diagnose_coherence_weights.py", "test_diagnose_combined_forms.py",
+         "test_diagnose_claims.py", "test_diagnose_roll_radius.py", "test_diagnose_compliance.py",
+         "test_diagnose_phantom.py", "test_diagnose.py", "test_diagnose_backlash.py", "test_diagnose_confirm.py",
          "test_diagnose_regress.py")
 
 
