@@ -40,7 +40,14 @@ UNWIND_ZONE = ("idler_u1", "roller9")
 REWIND_ZONE = ("idler_r1", "roller19")
 
 
-def independent_cases(root, seed, ids, timeout=1200):
+# A whole diagnosis in a subprocess is stopped after this long: a guard against a hung run,
+# not a speed test. On a fresh machine the engine compiles every structure anew, and under
+# `make test` two workers share the cores: test_diagnose_same_frequency's case took 762 s there,
+# and was stopped at the former 900 s with a benchmark beside it (364 s of CPU by then).
+DIAGNOSIS_TIMEOUT = 2700
+
+
+def independent_cases(root, seed, ids, timeout=DIAGNOSIS_TIMEOUT):
     """Cases ``ids`` of the independent benchmark's draw for ``seed``, diagnosed blind
     in a subprocess (one job) in ``root``: {id: the benchmark's result dict}."""
     from webline.diagnosis import benchmark as B

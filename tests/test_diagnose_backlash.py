@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from webline.diagnosis import benchmark as B
+from records import DIAGNOSIS_TIMEOUT
 
 BACKLASH_DEG = 1.8
 
@@ -31,7 +32,7 @@ def case_result(tmp_path_factory, fmus):
     case = B.Case(id="bl", category="backlash", effects=[effect],
                   runs=[B.RunSpec("run1", speed_fpm=220.0, duration_s=8.0, profile="speed_ramp",
                                   noise_N=0.05, seed=3)])
-    res = B.evaluate_case(case, root, line, fmus, timeout=900, extra=["--jobs", "1"])
+    res = B.evaluate_case(case, root, line, fmus, timeout=DIAGNOSIS_TIMEOUT, extra=["--jobs", "1"])
     assert res["report"] is not None, res.get("stderr") or res.get("generation_error")
     return res
 

@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("coherence24"), SEED, ("c17",), timeout=1500)["c17"]
+    return independent_cases(tmp_path_factory.mktemp("coherence24"), SEED, ("c17",))["c17"]
 
 
 def test_the_case_is_the_one_drawn(case):

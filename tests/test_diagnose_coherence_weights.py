@@ -24,7 +24,7 @@ SEED = 19
 
 @pytest.fixture(scope="module")
 def cases(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("coherence_weights"), SEED, ("c02", "c16"), timeout=1200)
+    return independent_cases(tmp_path_factory.mktemp("coherence_weights"), SEED, ("c02", "c16"))
 
 
 def test_the_cases_are_the_ones_drawn(cases):

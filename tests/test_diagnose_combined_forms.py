@@ -20,7 +20,7 @@ SEED = 10
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("combined_forms"), SEED, ("c19",), timeout=1800)["c19"]
+    return independent_cases(tmp_path_factory.mktemp("combined_forms"), SEED, ("c19",))["c19"]
 
 
 def test_the_case_is_the_one_drawn(case):

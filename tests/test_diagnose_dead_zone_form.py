@@ -20,7 +20,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("dead_zone_form"), SEED, ("c24",), timeout=1800)["c24"]
+    return independent_cases(tmp_path_factory.mktemp("dead_zone_form"), SEED, ("c24",))["c24"]
 
 
 def test_the_case_is_the_one_drawn(case):

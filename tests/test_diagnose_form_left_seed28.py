@@ -28,12 +28,12 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("formleft28"), SEED, ("c04",), timeout=900)["c04"]
+    return independent_cases(tmp_path_factory.mktemp("formleft28"), SEED, ("c04",))["c04"]
 
 
 @pytest.fixture(scope="module")
 def case24(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("shaftpars28"), SEED, ("c24",), timeout=1500)["c24"]
+    return independent_cases(tmp_path_factory.mktemp("shaftpars28"), SEED, ("c24",))["c24"]
 
 
 def test_the_case_is_the_one_drawn(case):

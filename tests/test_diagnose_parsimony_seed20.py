@@ -32,7 +32,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def cases(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("parsimony20"), SEED, ("c16", "c24"), timeout=1200)
+    return independent_cases(tmp_path_factory.mktemp("parsimony20"), SEED, ("c16", "c24"))
 
 
 def test_the_cases_are_the_ones_drawn(cases):

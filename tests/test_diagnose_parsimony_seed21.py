@@ -25,7 +25,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("parsimony21"), SEED, ("c07",), timeout=1200)["c07"]
+    return independent_cases(tmp_path_factory.mktemp("parsimony21"), SEED, ("c07",))["c07"]
 
 
 def test_the_case_is_the_one_drawn(case):

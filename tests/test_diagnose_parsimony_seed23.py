@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("parsimony23"), SEED, ("c05",), timeout=1200)["c05"]
+    return independent_cases(tmp_path_factory.mktemp("parsimony23"), SEED, ("c05",))["c05"]
 
 
 def test_the_case_is_the_one_drawn(case):

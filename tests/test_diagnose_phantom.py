@@ -15,7 +15,7 @@ Built and scored by the independent benchmark's own code (truth: monolithic
 fast engine, a 10 s record at 250 Hz; diagnosis run blind in a subprocess).
 """
 import pytest
-from records import REWIND_ZONE, assert_no_sensor_worse
+from records import DIAGNOSIS_TIMEOUT, REWIND_ZONE, assert_no_sensor_worse
 
 from webline.diagnosis import benchmark as B
 from webline.diagnosis import benchmark_independent as BI
@@ -46,7 +46,7 @@ def case_result(tmp_path_factory):
     # the transmitting forms are the first two screened (feed forward none / reference)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(BI, "form_set", feedforward_only)
-        return BI.evaluate_case(case, root, line, timeout=900,
+        return BI.evaluate_case(case, root, line, timeout=DIAGNOSIS_TIMEOUT,
                                 extra=["--jobs", "1", "--no-other", "--max-structures", "2", "--harmonics", "3"])
 
 

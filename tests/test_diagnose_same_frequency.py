@@ -14,6 +14,7 @@ the master, diagnosis run blind in a subprocess.
 import pytest
 
 from webline.diagnosis import benchmark as B
+from records import DIAGNOSIS_TIMEOUT
 
 MM = 1e-3
 
@@ -27,7 +28,7 @@ def case_result(tmp_path_factory, fmus):
                  B.Effect("eccentricity", "idler_r1", C_m=[0.06 * MM], psi_rad=[-0.4])],
         runs=[B.RunSpec("run1", speed_fpm=200.0, duration_s=6.0, noise_N=0.05, seed=11)],
     )
-    return B.evaluate_case(case, root, B.derive_line(), fmus, timeout=900, extra=["--jobs", "1"])
+    return B.evaluate_case(case, root, B.derive_line(), fmus, timeout=DIAGNOSIS_TIMEOUT, extra=["--jobs", "1"])
 
 
 def test_both_sources_at_one_frequency_are_found(case_result):
@@ -64,7 +65,7 @@ def one_source_result(tmp_path_factory, fmus):
                           psi_rad=[-2.1639, 1.3718, -2.1481, 1.4711])],
         runs=[B.RunSpec("run1", speed_fpm=220.0, duration_s=10.0, noise_N=0.0578, seed=561603559)],
     )
-    return B.evaluate_case(case, root, B.derive_line(), fmus, timeout=900, extra=["--jobs", "1"])
+    return B.evaluate_case(case, root, B.derive_line(), fmus, timeout=DIAGNOSIS_TIMEOUT, extra=["--jobs", "1"])
 
 
 def test_one_source_is_not_split_into_two(one_source_result):

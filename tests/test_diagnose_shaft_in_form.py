@@ -26,7 +26,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def cases(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("shaft_in_form"), SEED, ("c05", "c17"), timeout=1800)
+    return independent_cases(tmp_path_factory.mktemp("shaft_in_form"), SEED, ("c05", "c17"))
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,7 @@ pytestmark = pytest.mark.slow  # whole blind diagnoses of several minutes each: 
 
 @pytest.fixture(scope="module")
 def case(tmp_path_factory):
-    return independent_cases(tmp_path_factory.mktemp("other_runs22"), SEED, ("c11",), timeout=1200)["c11"]
+    return independent_cases(tmp_path_factory.mktemp("other_runs22"), SEED, ("c11",))["c11"]
 
 
 def test_the_case_is_the_one_drawn(case):
