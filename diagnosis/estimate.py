@@ -194,13 +194,38 @@ def fit_harmonics_joint(y, families):
     of a hertz apart)."""
     if len(families) == 1:
         return fit_harmonics(y, *families[0])
+    return fit_harmonics_families(y, families)[0]
+
+
+def fit_harmonics_families(y, families, inflation=False):
+    """Least-squares complex amplitudes of every family of ``families`` [(theta,
+    orders), ...] fitted together on ``y``: one array per family (zeros if ``y`` is
+    too short for the basis).
+
+    ``inflation``: also return, per order of the first family, the factor by which
+    fitting the others beside it inflates its coefficients' noise variance (1 where
+    the bases are orthogonal, 1 / (1 - rho^2) for one line beside another of
+    correlation rho): a z of the first family's lines divided by it stays Exp(1)
+    under noise."""
     A = np.hstack([harmonic_basis(th, o) for th, o in families])
-    n0 = 2 * len(families[0][1])
+    n0 = len(families[0][1])
     if len(y) < A.shape[1] + 2:
-        return np.zeros(len(families[0][1]), complex)
+        out = [np.zeros(len(o), complex) for _, o in families]
+        return (out, np.ones(n0)) if inflation else out
     coef, *_ = np.linalg.lstsq(A, np.asarray(y, float), rcond=None)
-    coef = coef[:n0]
-    return coef[0::2] + 1j * coef[1::2]
+    out, i = [], 0
+    for _, o in families:
+        c = coef[i:i + 2 * len(o)]
+        out.append(c[0::2] + 1j * c[1::2])
+        i += 2 * len(o)
+    if not inflation:
+        return out
+    G = A.T @ A
+    try:
+        f = np.diag(np.linalg.inv(G)) * np.diag(G)
+    except np.linalg.LinAlgError:
+        f = np.full(A.shape[1], np.inf)
+    return out, np.maximum(0.5 * (f[0:2 * n0:2] + f[1:2 * n0:2]), 1.0)
 
 
 def coherence_debiased(Ys, v, clip=(0.0, 1.0)):
