@@ -79,6 +79,13 @@ def shortfalls(logp, share, share_left, coherence, opt):
     return why
 
 
+def orders_shown(score):
+    """The orders a family's screen score shows on the element's angle: z above
+    ``estimate.ORDER_SHOWN_Z`` per fit run."""
+    runs = max(1, len(score.get("fits") or {}))
+    return {int(j) for j, z in (score.get("z_order") or {}).items() if float(z) > est.ORDER_SHOWN_Z * runs}
+
+
 @dataclass
 class Options:
     harmonics: int = 6               # Fourier terms per element ({32} uses 6)
@@ -1006,8 +1013,8 @@ class Diagnosis:
                 X, misfit = est.solve_fourier(M, G, W)
                 # orders the data does not show above the noise stay out of the model
                 e_ord = np.sum(np.abs(M) ** 2, axis=0)
-                keep = np.array([d["z_order"].get(j, 0.0) > est.ORDER_SHOWN_Z * max(1, len(d["fits"]))
-                                 or e_ord[j - 1] > 0.02 * np.sum(e_ord) for j in range(1, len(X) + 1)])
+                by_z = orders_shown(d)
+                keep = np.array([j in by_z or e_ord[j - 1] > 0.02 * np.sum(e_ord) for j in range(1, len(X) + 1)])
                 # ... but the report says what they were: "not in the model" is not "zero"
                 below = {j: (complex(X[j - 1]), float(d["z_order"].get(j, 0.0)))
                          for j in range(1, len(X) + 1) if not keep[j - 1] and abs(X[j - 1]) > 0}

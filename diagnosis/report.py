@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from webline.diagnosis import estimate as est
-from webline.diagnosis.pipeline import shortfalls
+from webline.diagnosis.pipeline import orders_shown, shortfalls
 from webline.diagnosis.structure import NOT_IDENTIFIABLE, identifiable_range
 
 SCHEMA = "webline-diagnose-1"
@@ -261,7 +261,7 @@ def _left_out(b, X, listed):
     sc = b.get("score") or {}
     runs = max(1, len(sc.get("fits") or {}))
     z_of = {int(j): float(z) for j, z in (sc.get("z_order") or {}).items()}
-    by_z = {j for j, z in z_of.items() if z > est.ORDER_SHOWN_Z * runs}
+    by_z = orders_shown(sc)
     kept = set(b.get("kept") or ()) | by_z
     strong = [(j, z_of.get(j, 0.0)) for j in sorted(kept) if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
     if not strong or b.get("G") is None or b.get("M") is None:

@@ -1074,6 +1074,13 @@ def secondaries(d):
             and fe["same_frequency_as"] != fe["ranked"][0]["cand"].element]
 
 
+def near_full(nrmse, full):
+    """A sensor's NRMSE about as good as the full set's ``full``: at most :data:`PARSIMONY`
+    (relative) above it (the parsimony rule's first test, and all a line within the data
+    sheet's tolerances may claim)."""
+    return nrmse <= (1.0 + PARSIMONY) * full
+
+
 def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
     """(per-sensor numbers, None if about as good else why not): NRMSE per sensor
     of the full set (with the secondary sources, layout's form), of the set
@@ -1119,7 +1126,7 @@ def parsimony_rule(nr_full, nr_without, nr_form, form="the form", floor=None):
         # forms recover (seed-3 c04 and c13: phantoms taking 0.04 and 0.01 of NRMSE^2,
         # recovered 40 % and -171 %; seed-0 c07: 0.008, 78 %)
         big = sec_part >= SEC_SHARE
-        ok = (f > 0 and p <= (1.0 + PARSIMONY) * f) or (rec is not None and rec >= RECOVER) \
+        ok = (f > 0 and near_full(p, f)) or (rec is not None and rec >= RECOVER) \
             or (closes is not None and closes < CLOSES and (not big or (rec is not None and rec >= RECOVER_MIN)))
         if why is not None or (ok and not unrecovered):
             continue
@@ -1241,8 +1248,7 @@ def tolerance_line_refused(r, full):
     it (lc9 0.808 against 0.811, lc19 0.697 against 0.693)."""
     if not r.get("tolerance_line"):
         return None
-    worse = {s_: v for s_, v in r["nrmse"].items()
-             if v > (1.0 + PARSIMONY) * full["nrmse"].get(s_, math.inf)}
+    worse = {s_: v for s_, v in r["nrmse"].items() if not near_full(v, full["nrmse"].get(s_, math.inf))}
     if not worse:
         return None
     return (f"'{r['form']}' is a line within the data sheet's tolerances, which must fit every sensor within "
