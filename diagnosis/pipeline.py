@@ -204,17 +204,18 @@ def _apart(c, th, orders, beside, segs, T_seg):
     the S-wrap leader's order 4 on every segment; coherence 0.997 fitted jointly,
     0.28 with that order set aside and its other orders noise)."""
     free = np.ones(len(orders), bool)
-    if not beside:
-        return free
-    oj = np.asarray(orders, float)
     for g in segs:
-        dt = max(c.t[g[-1]] - c.t[g[0]], 1e-9)
-        f = abs(th[g[-1]] - th[g[0]]) / (2 * math.pi * dt)
         for tb, ob in beside:
-            fb = abs(tb[g[-1]] - tb[g[0]]) / (2 * math.pi * dt)
-            gap = np.min(np.abs(oj[:, None] * f - np.asarray(ob, float)[None, :] * fb), axis=1)
-            free &= gap * T_seg >= APART
+            free &= np.min(_line_gaps(c, th, orders, tb, ob, g), axis=1) * T_seg >= APART
     return free
+
+
+def _line_gaps(c, th, orders, tb, ob, idx):
+    """|j f - k f_b| (Hz) between the lines of two families over the samples ``idx``:
+    ``orders`` j on the angle ``th`` (rows) against ``ob`` k on ``tb`` (columns), each
+    at its mean frequency there."""
+    f, fb = est.mean_frequency(c.t, th, idx), est.mean_frequency(c.t, tb, idx)
+    return np.abs(np.asarray(orders, float)[:, None] * f - np.asarray(ob, float)[None, :] * fb)
 
 
 NEAR = (0.5, 3.0)   # a taken family's line this many resolutions of a fit piece from a family's is fitted with it
@@ -237,12 +238,9 @@ def _near_lines(c, th, orders, beside, idx):
     if not beside or len(idx) < 2:
         return []
     T = len(idx) / c.fs
-    f = est.mean_frequency(c.t, th, idx)
-    oj = np.asarray(orders, float) * f
     out = []
     for tb, ob in beside:
-        fb = est.mean_frequency(c.t, tb, idx)
-        gap = np.min(np.abs(np.asarray(ob, float)[:, None] * fb - oj[None, :]), axis=1) * T
+        gap = np.min(_line_gaps(c, th, orders, tb, ob, idx), axis=0) * T
         keep = [j for j, g in zip(ob, gap) if NEAR[0] <= g < NEAR[1]]
         if keep:
             out.append((tb, keep))
