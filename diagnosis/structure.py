@@ -612,8 +612,15 @@ def screen(d):
             # sources and every swap: simulated once per form (the engine is deterministic)
             key = repr(sorted(sets.items()))
             if key not in nominal_of:
-                nominal_of[key] = sim_fit(alt0, f"structure {form} nominal")
+                try:
+                    nominal_of[key] = sim_fit(alt0, f"structure {form} nominal")
+                except SimulationFailed as exc:
+                    # ... and a form whose nominal fails fails for every set: not run again
+                    # (independent seed 43: 'speed_gain x0.5' diverged five times a case)
+                    nominal_of[key] = exc
             nom_alt = nominal_of[key]
+            if isinstance(nom_alt, SimulationFailed):
+                raise nom_alt
             X0s = {cand.element: X0 for cand, X0, _ in use}
             # no periodic effect: the form alone (a slow residual that follows the speed)
             probe = sim_fit(with_all(alt0, X0s), f"structure {name} probe") if use else nom_alt

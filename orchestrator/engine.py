@@ -861,6 +861,30 @@ def _noise_arrays(compiled):
     return slot, seed, std
 
 
+DIVERGED_X = 100.0   # speed-up over the last recorded speed past which a roll "ran empty" by diverging
+
+
+def _roll_failure(ref, k, X, t_eval, n, t_fail):
+    """The message for component ``k``'s failed radius check. A roll that reaches its
+    core from a radius far above it within one recording interval did not run empty:
+    its speed diverged (an unstable loop), and the message says so (a structure screen's
+    'speed_gain x0.5' reported 'material roll empty' at R = 0.157 m, core 0.044 m)."""
+    comp, m, a = ref.names[k], ref.models[k], ref.offsets[k][0]
+    i = max(n - 1, 0)
+    R, w = float(X[i, a + 2]), float(X[i, a])
+    t_last = float(t_eval[i]) if n > 0 else float(t_eval[0])
+    # the radius change the last recorded speed gives up to the failure ({3}-{5}: one thickness a turn)
+    drop = abs(w) * max(t_fail - t_last, 0.0) * m.thickness / (2.0 * math.pi)
+    gap = abs(R - m.R_core)
+    if gap > DIVERGED_X * max(drop, 1e-300):
+        return (f"{comp}: the run diverged: the roll's radius went from R = {R:.6g} m at t = {t_last:.6g} s "
+                f"to its core (R_core = {m.R_core:.6g} m) by t = {t_fail:.6g} s, which needs more than "
+                f"{DIVERGED_X:g} x its speed at t = {t_last:.6g} s ({w:.4g} rad/s): the line is unstable "
+                f"with these parameters")
+    return (f"{comp}: material roll {'empty' if m.WINDING < 0 else 'unwound past its core'}: "
+            f"radius R = {R:.6g} m vs R_core = {m.R_core:.6g} m (by t = {t_fail:.6g} s)")
+
+
 def _result(compiled, t_eval, Y, X, status, where, ev, h, wall, compile_s):
     from webline.orchestrator.results import Result
     ref = compiled.ref
@@ -873,12 +897,7 @@ def _result(compiled, t_eval, Y, X, status, where, ev, h, wall, compile_s):
         if status < 0:
             message = f"the state became non-finite before t = {t_fail:.6g} s"
         else:
-            comp = ref.names[status - 1]
-            m = ref.models[status - 1]
-            a = ref.offsets[status - 1][0]
-            message = (f"{comp}: material roll {'empty' if m.WINDING < 0 else 'unwound past its core'}: "
-                       f"radius R = {X[max(n - 1, 0), a + 2]:.6g} m vs R_core = {m.R_core:.6g} m "
-                       f"(by t = {t_fail:.6g} s)")
+            message = _roll_failure(ref, status - 1, X, t_eval, n, t_fail)
     meta = {"kind": "engine", "status": "ok" if status == 0 else "failed", "message": message,
             "start": exp.start, "stop": exp.stop, "algorithm": "monolithic RK4 (fast engine)",
             "solver": {"method": "RK4", "h": h, "wall_s": wall, "compile_s": compile_s,

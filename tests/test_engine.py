@@ -142,6 +142,26 @@ def test_empty_roll_fails_cleanly():
     assert res.time.size < 10
 
 
+def test_diverged_roll_is_not_called_empty():
+    """A roll whose radius reaches the core within one sample from far above it diverged:
+    at its last recorded speed the radius falls one thickness a turn ({3}-{5})."""
+    s = _system(ROOT / "scenarios" / "ewl.yaml", duration=1.0)
+    c = engine.compile_system(s)
+    k = c.ref.names.index("unwind")
+    a = c.ref.offsets[k][0]
+    m = c.ref.models[k]
+    t = np.array([0.0, 0.002, 0.004])
+    X = np.zeros((3, c.x0.size))
+    X[:, a], X[:, a + 2] = 10.0, 0.15          # 10 rad/s at R = 0.15 m
+    msg = engine._roll_failure(c.ref, k, X, t, 3, 0.006)
+    assert "diverged" in msg and "unstable" in msg
+    # the same radius change at a speed that does it in one interval: a roll run empty
+    w = (0.15 - m.R_core) * 2.0 * np.pi / (m.thickness * 0.002)
+    X[:, a] = w
+    msg = engine._roll_failure(c.ref, k, X, t, 3, 0.006)
+    assert "empty" in msg and "diverged" not in msg
+
+
 def test_bad_t_eval_is_refused():
     s = _system(ROOT / "scenarios" / "ewl.yaml", duration=0.2)
     with pytest.raises(ValueError, match="increasing"):
