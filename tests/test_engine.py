@@ -178,7 +178,29 @@ FORMS = {  # model-form options (docs/layout.md); skipped where this checkout do
     "feedforward_reference": {f"drives.speed_loops.{k}.feedforward": "reference" for k in LOOPS},
     "feedforward_none": {f"drives.speed_loops.{k}.feedforward": "none" for k in LOOPS},
     "filter_order_2": {f"sensors.{s}.filter_order": 2 for s in ("lc9", "lc15", "lc19")},
+    # a lag far below the step the line's modes need: the step is set by its stability alone
+    "current_lag_fast": {f"drives.speed_loops.{k}.current_lag": "0.2 ms" for k in LOOPS},
 }
+
+
+def test_step_for_keeps_oscillating_modes_accurate_and_decaying_ones_stable():
+    h_max = engine.H_MAX
+    assert engine.step_for([-1.4 + 295.5j, -1.4 - 295.5j], h_max) == h_max
+    # an oscillating (or growing) mode: |lambda| h = 0.5
+    assert engine.step_for([-10.0 + 3000.0j, -10.0 - 3000.0j], h_max) == pytest.approx(0.5 / 3000.0, rel=1e-4)
+    assert engine.step_for([3000.0], h_max) == pytest.approx(0.5 / 3000.0)
+    # a decaying real mode (a 0.2 ms lag): |lambda| h = 2, inside RK4's real-axis limit 2.785
+    assert engine.step_for([-5000.0, -1.4 + 295.5j], h_max) == pytest.approx(2.0 / 5000.0)
+    z = -2.0 + engine.DECAY_SLOPE * 2.0j   # the edge of what counts as decaying real
+    assert abs(1 + z + z ** 2 / 2 + z ** 3 / 6 + z ** 4 / 24) < 1.0
+    assert engine.step_for([], h_max) == h_max
+
+
+def test_a_fast_lag_sets_the_step_by_stability():
+    s = _system(ROOT / "scenarios" / "paper" / "f_accel_decel.yaml", duration=0.5,
+                **FORMS["current_lag_fast"])
+    c = engine.compile_system(s)
+    assert c.step() == pytest.approx(2.0 * 0.2e-3, rel=0.05)
 
 
 @pytest.mark.parametrize("form", sorted(FORMS))
