@@ -30,10 +30,11 @@ of the Jacobian at the start (finite differences of the compiled rhs), c = 0.5 f
 the modes that oscillate or grow: RK4's relative error per step on a mode of rate
 lambda is about (lambda h)^5/120, 2.6e-4 at the stiffest such mode and far below for
 the slow modes that carry the tension signal. A real decaying mode (a current-loop
-lag, a fast filter) needs stability only, c = 2 (:func:`step_for`). Load-cell noise (``LoadCellModel.noise``, deterministic in
-(seed, t)) is added to the recorded outputs at the sample times exactly as the
-reference does; inside the dynamics (where a load cell feeds a tension loop) it is
-held from one output time to the next, as the co-simulation master holds it over a step.
+lag, a fast filter) needs stability only, c = 2 (:func:`step_for`). Load-cell noise
+(``LoadCellModel.noise``, deterministic in (seed, t)) is added to the recorded
+outputs at the sample times exactly as the reference does; inside the dynamics
+(where a load cell feeds a tension loop) it is held from one output time to the
+next, as the co-simulation master holds it over a step.
 
 API: :func:`compile_system` -> :class:`Compiled`; :func:`simulate` ->
 :class:`~orchestrator.results.Result` (columns ``<component>.<variable>``, meta kind
@@ -895,11 +896,11 @@ def _roll_failure(ref, k, X, t_eval, n, t_fail):
     comp, m, a = ref.names[k], ref.models[k], ref.offsets[k][0]
     i = max(n - 1, 0)
     R, w = float(X[i, a + 2]), float(X[i, a])
-    t_last = float(t_eval[i]) if n > 0 else float(t_eval[0])
+    t_last = float(t_eval[i])
     # the radius change the last recorded speed gives up to the failure ({3}-{5}: one thickness a turn)
     drop = abs(w) * max(t_fail - t_last, 0.0) * m.thickness / (2.0 * math.pi)
     gap = abs(R - m.R_core)
-    if gap > DIVERGED_X * max(drop, 1e-300):
+    if n > 0 and gap > DIVERGED_X * max(drop, 1e-300):   # no row recorded: nothing to compare
         return (f"{comp}: the run diverged: the roll's radius went from R = {R:.6g} m at t = {t_last:.6g} s "
                 f"to its core (R_core = {m.R_core:.6g} m) by t = {t_fail:.6g} s, which needs more than "
                 f"{DIVERGED_X:g} x its speed at t = {t_last:.6g} s ({w:.4g} rad/s): the line is unstable "

@@ -160,6 +160,8 @@ def test_diverged_roll_is_not_called_empty():
     X[:, a] = w
     msg = engine._roll_failure(c.ref, k, X, t, 3, 0.006)
     assert "empty" in msg and "diverged" not in msg
+    # nothing recorded before the failure: no speed to judge it by
+    assert "empty" in engine._roll_failure(c.ref, k, X, t, 0, 0.002)
 
 
 def test_bad_t_eval_is_refused():
