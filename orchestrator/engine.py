@@ -939,7 +939,7 @@ def simulate(system, t_eval=None, params=None, h=None, h_max=H_MAX, compiled=Non
     """Run ``system`` with the fast engine; a :class:`~orchestrator.results.Result` like
     :func:`orchestrator.reference.simulate_reference` (default times: the master's output
     times). ``params``: a parameter vector replacing the system's (``Compiled.p`` layout);
-    ``h``: fixed RK4 step (default from the spectral radius, at most ``h_max``).
+    ``h``: fixed RK4 step (default :meth:`Compiled.step`, from the Jacobian's modes, at most ``h_max``).
     A material roll that runs empty or a non-finite state gives ``status == "failed"``
     with the rows up to there."""
     from webline.orchestrator.reference import output_times

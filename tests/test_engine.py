@@ -1,7 +1,8 @@
 """The fast engine (orchestrator.engine) against the monolithic reference and the co-simulation.
 
 Tolerances. The engine integrates the reference's ODE with classical RK4 at a
-fixed step h <= 1 ms and h <= 0.5/rho (rho the Jacobian's spectral radius). Its
+fixed step h <= 1 ms, h <= 0.5/|lambda| over the Jacobian's modes that oscillate or
+grow and h <= 2/|lambda| over its real decaying ones (engine.step_for). Its
 global error is O(h^4): on the line's tension-carrying modes (|lambda| h <= 0.1)
 the relative error per unit time is about (lambda h)^4/120 < 1e-6, and the
 reference (LSODA, rtol 1e-8) adds about 1e-8; the 0.1 % bound of issue 10 is
