@@ -16,7 +16,14 @@ refined layout: for each ideal drive whose torque in that model reverses or
 stays near zero (:func:`others.torque_reverses`), a stiff shaft (50 Hz, as the
 deterministic screen) with a dead zone on its grid of widths is simulated on
 every run; the width that leaves the least residual energy on the fit runs is
-kept, the periodic effects re-estimated in the model with it, if it lowers the
+kept. The element's bearing friction is then scanned at that width
+(:data:`FRICTION_FACTORS`): behind a rigid speed-controlled drive friction
+leaves no trace (the loop supplies it), but behind a dead zone it decides how
+long the element runs free before its drive catches it again, and a data
+sheet's friction is rarely within a factor 2 (independent seed-44 c05: the
+truth's own 0.78 deg dead zone at the sheet's friction left 1.9 x the rigid
+model's residual energy, at the truth's 2.1 x friction 1.03 x). The best pair
+is kept, the periodic effects re-estimated in the model with it, if it lowers the
 residual, against the same re-estimate without the dead zone (what the polish
 alone gains is no evidence), on some load cell block by block beyond noise
 (:func:`compliance.rise_t` at most ``-FALL_T``) and passes the claim check
@@ -28,6 +35,7 @@ import logging
 import math
 
 from webline.diagnosis import claims
+from webline.diagnosis import layout_edit
 from webline.diagnosis import others
 from webline.diagnosis import regress
 
@@ -38,12 +46,31 @@ SHAFT_HZ = 50.0                         # a stiff shaft: the dead zone, not a co
 FALL_T = 3.0                            # block-by-block fall of a sensor's squared error, in standard errors
 MIN_FALL = 0.005                        # ... and of the fit runs' residual energy, relative
 WIDTH_RTOL = 1e-6                       # widths whose residual energies agree this closely act alike
+FRICTION_FACTORS = (0.5, 1.5, 2.0, 3.0)  # the element's bearing friction x its refined value (benchmark: x0.3-3)
 
 
 def _energy(d, sims):
     """Residual energy over the fit runs' fit windows, all sensors, in N^2 s (a run counts
     by its duration, not its sample rate)."""
     return sum(c.energy(c.meas[s] - sims[c.name].columns[s]) for c in d.fit_ctx() for s in c.sensors)
+
+
+def _friction(d, el):
+    """``el``'s bearing friction in the refined layout, N*m*s/rad (0.0 where none is stated)."""
+    v = (d.refined_doc.get("set") or {}).get(f"path.{el}.friction")
+    if v is None:
+        v = next((e.get("friction", 0.0) for e in others._base(d).get("path", []) if e.get("name") == el), 0.0)
+    return float(others._q(v, "rot_damping"))
+
+
+def backlash_doc(doc, spec, deg, friction=None):
+    """``doc`` with a stiff shaft and a ``deg`` dead zone on ``spec``'s drive
+    (:func:`others._drive_doc`), and the element's bearing friction set to ``friction``
+    (N*m*s/rad) unless None."""
+    doc = others._drive_doc(copy.deepcopy(doc), spec, SHAFT_HZ, math.radians(deg))
+    if friction is not None:
+        doc = layout_edit.with_set(doc, f"path.{spec[0]}.friction", f"{friction:.6g} N*m*s/rad")
+    return doc
 
 
 def screen(d):
@@ -67,23 +94,36 @@ def screen(d):
             continue
         e0 = _energy(d, base)
         best = None
-        for deg in GRID_DEG:
-            doc = others._drive_doc(copy.deepcopy(d.refined_doc), spec, SHAFT_HZ, math.radians(deg))
+
+        def tryout(deg, friction, what):
+            nonlocal best
+            doc = backlash_doc(d.refined_doc, spec, deg, friction)
             try:
-                sims = d._simulate_all(doc, f"refined +{el} backlash {deg:g} deg")
+                sims = d._simulate_all(doc, f"refined +{el} backlash {what}")
             except Exception as exc:  # noqa: BLE001 - a width the engine cannot run is no candidate
-                log.info("  backlash of %s at %g deg failed: %s", el, deg, (str(exc).splitlines() or [""])[0][:200])
-                continue
+                log.info("  backlash of %s at %s failed: %s", el, what, (str(exc).splitlines() or [""])[0][:200])
+                return None
             e = _energy(d, sims)
-            rec["tried"].append({"backlash_deg": deg, "residual_energy_ratio": e / e0 if e0 > 0 else None})
             if best is None or e < best[1]:
-                best = (deg, e, sims, doc)
+                best = (deg, e, sims, doc, friction)
+            return e / e0 if e0 > 0 else None
+
+        for deg in GRID_DEG:
+            rec["tried"].append({"backlash_deg": deg, "residual_energy_ratio": tryout(deg, None, f"{deg:g} deg")})
         if best is None:
             continue
         es = [x["residual_energy_ratio"] for x in rec["tried"] if x["residual_energy_ratio"] is not None]
         # a dead zone the swing never closes leaves the element free of its drive, whatever its
         # width (seed-8 c24: 0.4 and 4.9 deg alike to 1e-12): the width is then not identifiable
         rec["width_identifiable"] = bool(es) and (max(es) - min(es)) > WIDTH_RTOL * min(es)
+        b0 = _friction(d, el)
+        rec["friction_nominal"] = b0
+        rec["friction_tried"] = []
+        if b0 > 0:
+            deg = best[0]
+            for f in FRICTION_FACTORS:
+                rec["friction_tried"].append({"factor": f, "residual_energy_ratio": tryout(
+                    deg, b0 * f, f"{deg:g} deg, friction x{f:g}")})
         if ref is None:
             # the same re-estimate without a dead zone: what the polish alone gains is no evidence
             got0 = regress.reestimate(d, d.refined_doc, "no backlash")
@@ -91,7 +131,7 @@ def screen(d):
             ref = (e_got0, got0[1]) if e_got0 < e0 else (e0, base)
             rec_ref = {"residual_energy_ratio": ref[0] / e0 if e0 > 0 else None}
         rec["reestimated_without"] = rec_ref
-        deg, e, sims, doc = best
+        deg, e, sims, doc, friction = best
         # the periodic sources' estimates were made without the dead zone, which changes how
         # their lines pass through the S-wrap: re-estimated in the model with it
         got = regress.reestimate(d, doc, f"{el} backlash {deg:g} deg")
@@ -104,11 +144,12 @@ def screen(d):
         sensors = list(dict.fromkeys(s for c in fit for s in c.sensors))
         t = {s: rise_t(fit, ref[1], sims, s) for s in sensors}
         fall = 1.0 - e / ref[0] if ref[0] > 0 else 0.0
-        rec.update(best_deg=deg, energy_fall=fall, rise_t=t)
-        log.info("  backlash of %s (torque %s): best %g deg, residual energy %+.2f %%, block-by-block t %s",
-                 el, rng, deg, -100 * fall, ", ".join(f"{s} {v:+.2g}" for s, v in t.items()))
+        rec.update(best_deg=deg, best_friction=friction, energy_fall=fall, rise_t=t)
+        fr_text = f", friction {friction:.3g} N*m*s/rad" if friction is not None else ""
+        log.info("  backlash of %s (torque %s): best %g deg%s, residual energy %+.2f %%, block-by-block t %s",
+                 el, rng, deg, fr_text, -100 * fall, ", ".join(f"{s} {v:+.2g}" for s, v in t.items()))
         if fall < MIN_FALL or min(t.values()) > -FALL_T:
-            rec["why"] = (f"the best dead zone ({deg:g} deg), the periodic effects re-estimated with it, changes "
+            rec["why"] = (f"the best dead zone ({deg:g} deg{fr_text}), the periodic effects re-estimated with it, changes "
                           f"the residual energy by {-100 * fall:+.2g} % against the same re-estimate without it "
                           f"(needs -{100 * MIN_FALL:g} %); the error falls block by block at most "
                           f"{-min(t.values()):.2g} standard errors (needs {FALL_T:g})")
@@ -134,16 +175,22 @@ def screen(d):
                                         "grid_deg": list(GRID_DEG),
                                         "identifiable": rec["width_identifiable"]},
                            "motor_inertia": {"estimated": Jm, "unit": "kg*m^2"}},
-            "detail": (f"{el} backlash {deg:g} deg (crossed by the refined model's torque {rng})"
+            "detail": (f"{el} backlash {deg:g} deg (crossed by the refined model's torque {rng}){fr_text}"
                        if rec["width_identifiable"] else
                        f"{el} backlash (the refined model's torque {rng}; every width tried, "
-                       f"{GRID_DEG[0]:g}-{GRID_DEG[-1]:g} deg, acts alike: the swing never closes the dead "
-                       f"zone and {el} runs free of its drive, so the width is not identifiable from these "
-                       f"runs; a run that loads the drive, a speed ramp, would measure it)"),
+                       f"{GRID_DEG[0]:g}-{GRID_DEG[-1]:g} deg, acts alike: the teeth meet on one side only, "
+                       f"or never, and between contacts {el} runs free of its drive, so the width is not "
+                       f"identifiable from these runs; a run that loads the drive, a speed ramp, would "
+                       f"measure it){fr_text}"),
             "check": chk,
-            "apply_doc": (lambda doc_, spec=spec, deg=deg:
-                          others._drive_doc(doc_, spec, SHAFT_HZ, math.radians(deg))),
+            "apply_doc": (lambda doc_, spec=spec, deg=deg, friction=friction:
+                          backlash_doc(doc_, spec, deg, friction)),
         }
+        if friction is not None:
+            # behind the dead zone the element's own friction sets how long it runs free
+            eff["parameters"]["friction"] = {"estimated": friction, "unit": "N*m*s/rad",
+                                             "nominal": rec["friction_nominal"],
+                                             "factors_tried": list(FRICTION_FACTORS)}
         rec["claimed"] = True
         ref = None   # the next drive is judged against the model with this one's dead zone
         if new_X is not None:

@@ -81,3 +81,25 @@ def test_a_drive_torque_near_zero_counts_as_reversing():
     # a leader at 3 % of the largest holds a side
     cols["sl.tau"] = np.full_like(t, 0.03 * 10.8)
     assert others.torque_reverses(d, "sw_leader")[0] is False
+
+
+def test_the_dead_zone_screen_sets_the_element_friction_it_scans(monkeypatch):
+    """Behind a dead zone the element's own bearing friction decides how long it runs
+    free between contacts, so the screen scans it (``backlash.FRICTION_FACTORS``)
+    from the refined layout's value, falling back to the data sheet's."""
+    from types import SimpleNamespace as NS
+    from webline.diagnosis import backlash, others
+    from webline.orchestrator.units import quantity
+    sheet = {"path": [{"name": "sw_leader", "friction": "5e-3 N*m*s/rad"}, {"name": "idler", "friction": 0.0}]}
+    monkeypatch.setattr(others, "_base", lambda d: sheet)
+    d = NS(refined_doc={"base": "line.yaml", "set": {}})
+    assert backlash._friction(d, "sw_leader") == pytest.approx(5e-3)
+    assert backlash._friction(d, "idler") == 0.0
+    d.refined_doc["set"]["path.sw_leader.friction"] = "2 mN*m*s/rad"
+    assert backlash._friction(d, "sw_leader") == pytest.approx(2e-3)
+    spec = ("sw_leader", 0.15, ("inertia", 0.15))
+    doc = backlash.backlash_doc({"base": "line.yaml", "set": {}}, spec, 1.0, 0.0125)
+    assert quantity(doc["set"]["path.sw_leader.friction"], "rot_damping") == pytest.approx(0.0125)
+    drive = doc["set"]["drives.speed_loops.sw_leader.drive"]
+    assert quantity(drive["backlash"], "angle") == pytest.approx(math.radians(1.0), rel=1e-5)
+    assert "path.sw_leader.friction" not in backlash.backlash_doc({"base": "line.yaml", "set": {}}, spec, 1.0)["set"]
