@@ -112,10 +112,6 @@ def screen(d):
             rec["tried"].append({"backlash_deg": deg, "residual_energy_ratio": tryout(deg, None, f"{deg:g} deg")})
         if best is None:
             continue
-        es = [x["residual_energy_ratio"] for x in rec["tried"] if x["residual_energy_ratio"] is not None]
-        # a dead zone the swing never closes leaves the element free of its drive, whatever its
-        # width (seed-8 c24: 0.4 and 4.9 deg alike to 1e-12): the width is then not identifiable
-        rec["width_identifiable"] = bool(es) and (max(es) - min(es)) > WIDTH_RTOL * min(es)
         b0 = _friction(d, el)
         rec["friction_nominal"] = b0
         rec["friction_tried"] = []
@@ -124,6 +120,20 @@ def screen(d):
             for f in FRICTION_FACTORS:
                 rec["friction_tried"].append({"factor": f, "residual_energy_ratio": tryout(
                     deg, b0 * f, f"{deg:g} deg, friction x{f:g}")})
+        widths = rec["tried"]
+        if best[4] is not None:
+            # the widths again at the friction taken: how long the element runs free, and so
+            # which width fits, follows the friction (seed-44 c05: 0.4 deg best at the sheet's)
+            rec["tried_at_friction"] = widths = [
+                {"backlash_deg": deg, "residual_energy_ratio": tryout(
+                    deg, best[4], f"{deg:g} deg, friction {best[4]:.3g} N*m*s/rad")} for deg in GRID_DEG]
+        es = [x["residual_energy_ratio"] for x in widths if x["residual_energy_ratio"] is not None]
+        # a dead zone the swing never closes, or closes on one flank only, acts alike whatever its
+        # width (seed-8 c24: 0.4 and 4.9 deg alike to 1e-12): the width is then not identifiable
+        rec["width_identifiable"] = bool(es) and (max(es) - min(es)) > WIDTH_RTOL * min(es)
+        # how far apart the widths fit: a spread far below the dead zone's own fall reads a width
+        # the data hardly choose (seed-44 c05: 0.6 %, 3.9 deg best for the truth's 0.78)
+        rec["width_spread"] = (max(es) - min(es)) / min(es) if es and min(es) > 0 else None
         if ref is None:
             # the same re-estimate without a dead zone: what the polish alone gains is no evidence
             got0 = regress.reestimate(d, d.refined_doc, "no backlash")
@@ -173,7 +183,8 @@ def screen(d):
                                  f"{min(t, key=t.get).split('.')[0]}"),
             "parameters": {"backlash": {"estimated": math.radians(deg), "unit": "rad",
                                         "grid_deg": list(GRID_DEG),
-                                        "identifiable": rec["width_identifiable"]},
+                                        "identifiable": rec["width_identifiable"],
+                                        "residual_energy_spread_over_widths": rec["width_spread"]},
                            "motor_inertia": {"estimated": Jm, "unit": "kg*m^2"}},
             "detail": (f"{el} backlash {deg:g} deg (crossed by the refined model's torque {rng}){fr_text}"
                        if rec["width_identifiable"] else
