@@ -59,7 +59,7 @@ def _friction(d, el):
     """``el``'s bearing friction in the refined layout, N*m*s/rad (0.0 where none is stated)."""
     v = (d.refined_doc.get("set") or {}).get(f"path.{el}.friction")
     if v is None:
-        v = next((e.get("friction", 0.0) for e in others._base(d).get("path", []) if e.get("name") == el), 0.0)
+        v = (layout_edit.element_entry(d.refined_doc, el) or {}).get("friction", 0.0)
     return float(others._q(v, "rot_damping"))
 
 
@@ -130,10 +130,10 @@ def screen(d):
         es = [x["residual_energy_ratio"] for x in widths if x["residual_energy_ratio"] is not None]
         # a dead zone the swing never closes, or closes on one flank only, acts alike whatever its
         # width (seed-8 c24: 0.4 and 4.9 deg alike to 1e-12): the width is then not identifiable
-        rec["width_identifiable"] = bool(es) and (max(es) - min(es)) > WIDTH_RTOL * min(es)
         # how far apart the widths fit: a spread far below the dead zone's own fall reads a width
         # the data hardly choose (seed-44 c05: 0.6 %, 3.9 deg best for the truth's 0.78)
         rec["width_spread"] = (max(es) - min(es)) / min(es) if es and min(es) > 0 else None
+        rec["width_identifiable"] = rec["width_spread"] is not None and rec["width_spread"] > WIDTH_RTOL
         if ref is None:
             # the same re-estimate without a dead zone: what the polish alone gains is no evidence
             got0 = regress.reestimate(d, d.refined_doc, "no backlash")

@@ -88,10 +88,10 @@ def test_the_dead_zone_screen_sets_the_element_friction_it_scans(monkeypatch):
     free between contacts, so the screen scans it (``backlash.FRICTION_FACTORS``)
     from the refined layout's value, falling back to the data sheet's."""
     from types import SimpleNamespace as NS
-    from webline.diagnosis import backlash, others
+    from webline.diagnosis import backlash, layout_edit
     from webline.orchestrator.units import quantity
     sheet = {"path": [{"name": "sw_leader", "friction": "5e-3 N*m*s/rad"}, {"name": "idler", "friction": 0.0}]}
-    monkeypatch.setattr(others, "_base", lambda d: sheet)
+    monkeypatch.setattr(layout_edit, "_plain_base", lambda doc: sheet)
     d = NS(refined_doc={"base": "line.yaml", "set": {}})
     assert backlash._friction(d, "sw_leader") == pytest.approx(5e-3)
     assert backlash._friction(d, "idler") == 0.0
