@@ -103,3 +103,26 @@ def test_the_dead_zone_screen_sets_the_element_friction_it_scans(monkeypatch):
     drive = doc["set"]["drives.speed_loops.sw_leader.drive"]
     assert quantity(drive["backlash"], "angle") == pytest.approx(math.radians(1.0), rel=1e-5)
     assert "path.sw_leader.friction" not in backlash.backlash_doc({"base": "line.yaml", "set": {}}, spec, 1.0)["set"]
+
+
+def test_a_width_is_read_only_where_the_widths_near_the_best_span_a_factor_two():
+    """The widths fitting within MIN_FALL (0.5 %) of the best fit about as well: a range
+    wider than WIDTH_SPAN (2x) says the width is not identifiable from the runs."""
+    from webline.diagnosis import backlash
+    grid = [0.4, 0.5, 0.63, 0.78, 0.98, 1.2, 1.5, 1.9, 2.4, 3.0, 3.7, 4.6]
+    # a ramp that closes the dead zone on both flanks: a sharp minimum (the slow test's 1.8 deg case)
+    sharp = [{"backlash_deg": g, "residual_energy_ratio": 0.3 + abs(math.log(g / 1.9))} for g in grid]
+    spread, rng, ok = backlash.width_read(sharp)
+    assert ok and rng == [1.9, 1.9] and spread == pytest.approx((0.3 + math.log(1.9 / 0.4)) / 0.3 - 1.0)
+    # one-flank contact: every width within 0.6 %, in no order (seed-44 c05): not read
+    flat = [{"backlash_deg": g, "residual_energy_ratio": 0.9 * (1.0 + 0.006 * ((7 * i) % 12) / 11)}
+            for i, g in enumerate(grid)]
+    spread, rng, ok = backlash.width_read(flat)
+    assert not ok and rng[1] / rng[0] > 2.0 and spread == pytest.approx(0.006)
+    # a width the engine could not run is left out; just inside the threshold counts as near
+    edge = [{"backlash_deg": 1.0, "residual_energy_ratio": 0.5},
+            {"backlash_deg": 1.9, "residual_energy_ratio": 0.5 * 1.0049},
+            {"backlash_deg": 2.1, "residual_energy_ratio": 0.5 * 1.0051},
+            {"backlash_deg": 4.6, "residual_energy_ratio": None}]
+    assert backlash.width_read(edge)[1:] == ([1.0, 1.9], True)
+    assert backlash.width_read([{"backlash_deg": 1.0, "residual_energy_ratio": None}]) == (None, None, False)
