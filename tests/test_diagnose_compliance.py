@@ -47,6 +47,10 @@ def test_label_says_which_hump_a_claimed_shaft_reproduces():
     out = compliance.label([dict(h)], [rec2])
     assert out[0]["kind"] == "unexplained resonance" and "'feedforward reference'" in out[0]["text"]
     assert out[0]["rigid_form"] == "feedforward reference"
+    # two unclaimed records near the hump's frequency (its twin on the other sensor): said once
+    rec3 = dict(rec2, hump=dict(rec2["hump"], sensor="lc9.T", frequency_hz=4.5))
+    out = compliance.label([dict(h)], [rec2, rec3])
+    assert out[0]["text"].count("fits its spectrum") == 1, out[0]["text"]
 
 
 def test_a_claimed_shaft_names_the_next_drive_when_its_shaft_fits_the_band_nearly_as_well():
