@@ -86,6 +86,23 @@ def orders_shown(score):
     return {int(j) for j, z in (score.get("z_order") or {}).items() if float(z) > est.ORDER_SHOWN_Z * runs}
 
 
+def left_out_orders(b, X, listed=()):
+    """The orders the data show on a family's angle that its estimate ``X`` left at zero:
+    [(order, z, per-order gain estimate)] for the orders the first estimate kept (the
+    screen's z above ``estimate.ORDER_SHOWN_Z`` per fit run, :func:`orders_shown`, or kept
+    for their share of the line's energy, ``b["kept"]``) and not in ``listed``. ``b`` is
+    the family's ranked candidate (its screen ``score``, the harmonics ``M``, gains ``G``
+    and weights ``W`` of the nominal layout); the gain estimate solves them per order."""
+    sc = b.get("score") or {}
+    z_of = {int(j): float(z) for j, z in (sc.get("z_order") or {}).items()}
+    kept = set(b.get("kept") or ()) | orders_shown(sc)
+    strong = [j for j in sorted(kept) if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
+    if not strong or b.get("G") is None or b.get("M") is None:
+        return []
+    x_all, _ = est.solve_fourier(b["M"], b["G"], b["W"])
+    return [(j, z_of.get(j, 0.0), complex(x_all[j - 1])) for j in strong]
+
+
 @dataclass
 class Options:
     harmonics: int = 6               # Fourier terms per element ({32} uses 6)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from webline.diagnosis import estimate as est
-from webline.diagnosis.pipeline import orders_shown, shortfalls
+from webline.diagnosis.pipeline import left_out_orders, orders_shown, shortfalls
 from webline.diagnosis.structure import NOT_IDENTIFIABLE, identifiable_range
 
 SCHEMA = "webline-diagnose-1"
@@ -258,16 +258,9 @@ def _left_out(b, X, listed):
     mm, z 22 over two fit runs at 1.05-1.57 Hz among the line's slow modes, was missing
     from the report; seed-37 c08: its order 1, 0.064 mm, z 12 over two fit runs at 0.47
     and 0.94 Hz, kept for its energy, was missing too)."""
-    sc = b.get("score") or {}
-    runs = max(1, len(sc.get("fits") or {}))
-    z_of = {int(j): float(z) for j, z in (sc.get("z_order") or {}).items()}
-    by_z = orders_shown(sc)
-    kept = set(b.get("kept") or ()) | by_z
-    strong = [(j, z_of.get(j, 0.0)) for j in sorted(kept) if j <= len(X) and abs(X[j - 1]) == 0 and j not in listed]
-    if not strong or b.get("G") is None or b.get("M") is None:
-        return []
-    x_all, _ = est.solve_fourier(b["M"], b["G"], b["W"])
-    return [{"order": j, "amplitude": float(abs(x_all[j - 1])), "phase": float(np.angle(x_all[j - 1])),
+    runs = max(1, len((b.get("score") or {}).get("fits") or {}))
+    by_z = orders_shown(b.get("score") or {})
+    return [{"order": j, "amplitude": float(abs(x)), "phase": float(np.angle(x)),
              "sigma": None, "identifiable": False, "in_refined_layout": False, "left_out": True,
              "why": (f"the data show order {j} on the element's angle (z = {z:.0f} over {runs} fit run(s)"
                      + ("" if j in by_z else ", 2 % or more of the line's measured energy")
@@ -275,7 +268,7 @@ def _left_out(b, X, listed):
                      f"the fit of the whole line left it out (not significant against the noise near its "
                      f"frequency, or harmful when simulated): the amplitude is the per-order gain estimate, "
                      f"not checked by simulation")}
-            for j, z in strong]
+            for j, z, x in left_out_orders(b, X, listed)]
 
 
 def _cand_entry(d, r):

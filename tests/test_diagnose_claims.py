@@ -404,6 +404,38 @@ def test_an_order_the_first_estimate_kept_for_its_energy_is_listed_when_the_fit_
     assert "z = 12 over 2 fit run(s)" in h[1]["why"]
 
 
+def test_the_structure_screen_asks_every_form_for_the_orders_the_layouts_form_left_out():
+    """Independent seed-48 c14: an out-of-round unwind (order 1 117 um, order 5 68 um) in a
+    line without tension feed-forward; the fit in the layout's measured-tension form left
+    order 1 (z 25 over two fit runs) at zero, and the report gave it as 9 um, left out.
+    structure.readmit_orders puts the orders the report would list as left out back at
+    their per-order gain estimate, so that each rigid form re-estimates them from its own
+    response; an effect with none left out, and a rejected one, stay as they are."""
+    from types import SimpleNamespace
+
+    from webline.diagnosis import structure
+    from webline.diagnosis.report import _harmonics
+
+    G = np.array([[1.0 + 0.2j, 0.5, 0.3j], [0.4, 0.2 - 0.1j, 0.1]])
+    Xt = np.array([5e-5 * np.exp(1.1j), 1e-6, 4e-5])
+    X = np.array([0.0, 0.0, 4e-5], complex)
+    b = {"X": X, "G": G, "M": G * Xt[None, :], "W": np.ones(2), "cand": SimpleNamespace(element="unwind"),
+         "score": {"fits": {"run1": {}, "run2": {}}, "z_order": {1: 22.0, 2: 12.0, 3: 900.0}}}
+    whole = np.array([1e-5, 0.0, 2e-5], complex)
+    b2 = dict(b, X=whole, cand=SimpleNamespace(element="idler_u1"))
+    effs = [(b["cand"], X, {"ranked": [b]}), (b2["cand"], whole, {"ranked": [b2]}),
+            (SimpleNamespace(element="roller9"), X.copy(), None)]
+    shown, effs_r = structure.readmit_orders(None, effs)
+    assert shown == {"unwind": [1]}              # order 2: z 12 over 2 runs is not shown
+    X_r = effs_r[0][1]
+    assert X_r[0] == pytest.approx(Xt[0], rel=1e-9) and X_r[1] == 0 and X_r[2] == X[2]
+    assert X[0] == 0                             # the layout's estimate is not touched
+    assert effs_r[1][1] is whole and effs_r[2][1] is effs[2][1]
+    # the order taken back is the one the report would list as left out, at the same value
+    h = {x["order"]: x for x in _harmonics(b, X)}
+    assert h[1]["left_out"] and h[1]["amplitude"] == pytest.approx(abs(X_r[0]))
+
+
 def test_a_form_that_gives_up_anything_must_gain_one_percent():
     """Seed-4 c08 of the independent family: "feedforward reference" against the
     layout's own form lowered lc19 from 1.0046 to 0.9989 and raised lc9 from 1.0098
