@@ -160,43 +160,6 @@ def drive_forms_cleared(entries, drive_forms):
     return [r for grp in same.values() for r in _shaft_clears(grp, drive_forms)]
 
 
-LEVEL_SEP = 0.02   # steady stretches whose fundamentals differ by less than this share are one speed level
-
-
-def level_fundamentals(c, key):
-    """The fundamentals (Hz, x (1 + kappa)) of candidate ``key`` at each steady speed
-    level of run context ``c``: one per contiguous stretch of its fit window, stretches
-    within :data:`LEVEL_SEP` of each other merged. ``c.freq`` is the mean over the whole
-    window, which in a run held at two speeds is a line at neither (independent seed-33
-    c24: idler_u1 at 4.36 and 3.49 Hz, mean 4.06 Hz; the leader's 13.4 Hz shaft rang
-    its orders 3 and 4 at 13.1 and 14.0 Hz, the line-placed shaft went to 12.2 Hz)."""
-    th = c.theta.get(key) if getattr(c, "theta", None) else None
-    scale = 1.0 + c.kappa.get(key, 0.0)
-    mask = getattr(c, "mask", None)
-    if th is None or mask is None:
-        f = c.freq.get(key, 0.0) * scale
-        return [f] if f > 0 else []
-    idx = np.flatnonzero(mask)
-    if len(idx) < 2:
-        return []
-    cuts = np.flatnonzero(np.diff(idx) > 1) + 1
-    out = []
-    for seg in np.split(idx, cuts):
-        if len(seg) < 2:
-            continue
-        f = est.mean_frequency(c.t, th, seg) * scale
-        if f > 0 and all(abs(f - g) > LEVEL_SEP * g for g in out):
-            out.append(f)
-    return out
-
-
-def effect_line_fundamentals(d, key):
-    """The fundamentals of candidate ``key`` at every steady speed level of the first fit
-    run that holds it (:func:`level_fundamentals`), where its lines sit in the data."""
-    cc = next((c for c in d.fit_ctx() if d.orders_for(c, key)), None)
-    return level_fundamentals(cc, key) if cc is not None else []
-
-
 def shaft_forms(d, effs):
     """Compliant drive shafts on the driven rollers (not the rolls: those sit at the
     line's ends), as model forms: [(name, description, sets, (element, f_t))]. A
@@ -225,11 +188,12 @@ def shaft_forms(d, effs):
     modes = [r * f for r in SHAFT_RATIOS]
     lo, hi = LINE_SHAFT_HZ
     for cd, X0, _ in effs:
-        for f1 in effect_line_fundamentals(d, cd.key):
-            for j, x in enumerate(X0):
-                fl = (j + 1) * f1
-                if abs(x) > 0 and lo <= fl <= hi and all(abs(fl - g) > LINE_SHAFT_SEP * g for g in modes):
-                    modes.append(fl)
+        cc = next((c for c in d.fit_ctx() if d.orders_for(c, cd.key)), None)
+        f1 = cc.freq.get(cd.key, 0.0) * (1.0 + cc.kappa.get(cd.key, 0.0)) if cc is not None else 0.0
+        for j, x in enumerate(X0):
+            fl = (j + 1) * f1
+            if abs(x) > 0 and lo <= fl <= hi and all(abs(fl - g) > LINE_SHAFT_SEP * g for g in modes):
+                modes.append(fl)
     out = []
     # a drive the refined layout gives a dead zone already (diagnosis.backlash) is not ideal any more
     taken = others.non_ideal_drives(d)

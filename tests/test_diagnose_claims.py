@@ -498,40 +498,6 @@ def test_shaft_forms_sit_on_the_grid_and_on_the_effects_lines_in_band(monkeypatc
     assert sorted(f[3][2] for f in structure.shaft_forms(d, low)) == sorted(r * f_u for r in structure.SHAFT_RATIOS)
 
 
-def test_line_shafts_sit_on_each_steady_speed_levels_lines_not_on_the_mean(monkeypatch):
-    """structure.level_fundamentals: a run held at two speeds has its lines at each
-    level's fundamental; the mean over the window is a line at neither. Independent
-    seed-33 c24: idler_u1 at 4.36 and 3.49 Hz (mean 4.06 Hz), the leader's 13.4 Hz
-    shaft ringing orders 3 and 4 at 13.1 and 14.0 Hz."""
-    from types import SimpleNamespace
-
-    import numpy as np
-
-    from webline.diagnosis import others, structure
-
-    fs, f_hi, f_lo = 100.0, 4.36, 0.8 * 4.36
-    t = np.arange(0.0, 60.0, 1.0 / fs)
-    # 15 s at f_hi, a 6 s ramp, 15 s at f_lo, a 6 s ramp, 18 s at f_hi
-    f = np.interp(t, [0, 15, 21, 36, 42, 60], [f_hi, f_hi, f_lo, f_lo, f_hi, f_hi])
-    theta = 2 * np.pi * np.cumsum(f) / fs
-    ramp = ((t > 15) & (t < 21)) | ((t > 36) & (t < 42))
-    ctx = SimpleNamespace(t=t, theta={"idler_u1": theta}, mask=(t >= 1.0) & ~ramp,
-                          freq={"idler_u1": 4.06}, kappa={})
-    levels = structure.level_fundamentals(ctx, "idler_u1")
-    # each level's mean over its own stretch: exact but for the sample at the stretch's ends
-    assert np.allclose(sorted(levels), [f_lo, f_hi], rtol=2.0 / (fs * 15.0)), levels
-    d = SimpleNamespace(fit_ctx=lambda: [ctx], orders_for=lambda c, key: [1])
-    x = np.zeros(6, complex)
-    x[[2, 3]] = 1e-4                                              # orders 3 and 4
-    monkeypatch.setattr(others, "drive_candidates", lambda d: [("sw_leader", 0.1, ("inertia", 0.1))])
-    monkeypatch.setattr(others, "non_ideal_drives", lambda d: set())
-    modes = [fm[3][2] for fm in structure.shaft_forms(d, [(SimpleNamespace(key="idler_u1"), x, {})])]
-    for want in (3 * f_hi, 4 * f_hi, 3 * f_lo, 4 * f_lo):
-        assert min(abs(m - want) for m in modes) < 1e-3 * want, (want, modes)
-    # a run without angles (or a window) falls back on the mean fundamental
-    assert structure.level_fundamentals(SimpleNamespace(freq={"k": 2.0}, kappa={"k": 0.01}), "k") == [2.02]
-
-
 def test_a_shaft_form_must_fit_ten_percent_better_than_the_rigid_forms_with_its_sources():
     """Shaft forms (structure.shaft_forms) compete with the rigid forms that hold the
     same sources, simulated or only predicted. Seed-4 c05: with one idler and the
