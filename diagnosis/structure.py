@@ -118,8 +118,6 @@ def alternatives(d):
 
 
 SHAFT_RATIOS = (0.6, 0.8, 1.0, 1.25, 1.5)   # shaft forms: torsional mode / the first effect's fundamental
-LINE_SHAFT_HZ = (2.0, 20.0)   # shaft forms also on the effects' lines inside this band (Hz)
-LINE_SHAFT_SEP = 0.05         # ... when more than this share away from every mode already taken
 SHAFT_MARGIN = 0.1   # a drive form's sum of NRMSE^2 below the best rigid form's with the same sources, at least
 DEAD_ZONE_DEG = 1.0  # dead-zone forms: total width (one; the report says the width is the form's, not estimated)
 
@@ -168,15 +166,8 @@ def shaft_forms(d, effs):
     at 4.75 Hz and the S-wrap leader's shaft at 4.04 Hz; with rigid drives a phantom
     roller19 carried the line to lc19, and with the truth's shaft in the layout the
     diagnosis reports the idler alone). The modes sit on :data:`SHAFT_RATIOS` x the
-    first effect's fundamental in the first fit run that holds it, and on every line of
-    every effect (order j with a non-zero coefficient, j x its fundamental) inside
-    :data:`LINE_SHAFT_HZ` that lies more than :data:`LINE_SHAFT_SEP` from the modes
-    already taken: a shaft rings the periodic line nearest its mode, and the grid around
-    the first fundamental does not reach a mode several times higher (independent
-    seed-46 c24: the leader's 5.16 Hz shaft under the unwind's order 6 at 5.23 Hz, the
-    grid at 0.52-1.31 Hz; on the line it is found at 5.23 Hz, closed share 0.24 -> 0.94).
-    5 % damping and 30 % of the inertia on the motor side, as
-    :func:`diagnosis.others._drive_doc`."""
+    first effect's fundamental in the first fit run that holds it; 5 % damping and 30 %
+    of the inertia on the motor side, as :func:`diagnosis.others._drive_doc`."""
     from webline.diagnosis import others
     if not effs:
         return []
@@ -185,22 +176,14 @@ def shaft_forms(d, effs):
     f = c0.freq.get(cand.key, 0.0) * (1.0 + c0.kappa.get(cand.key, 0.0)) if c0 is not None else 0.0
     if f <= 0:
         return []
-    modes = [r * f for r in SHAFT_RATIOS]
-    lo, hi = LINE_SHAFT_HZ
-    for cd, X0, _ in effs:
-        cc = next((c for c in d.fit_ctx() if d.orders_for(c, cd.key)), None)
-        f1 = cc.freq.get(cd.key, 0.0) * (1.0 + cc.kappa.get(cd.key, 0.0)) if cc is not None else 0.0
-        for j, x in enumerate(X0):
-            fl = (j + 1) * f1
-            if abs(x) > 0 and lo <= fl <= hi and all(abs(fl - g) > LINE_SHAFT_SEP * g for g in modes):
-                modes.append(fl)
     out = []
     # a drive the refined layout gives a dead zone already (diagnosis.backlash) is not ideal any more
     taken = others.non_ideal_drives(d)
     for spec in others.drive_candidates(d):
         if spec[2][0] != "inertia" or spec[0] in taken:
             continue
-        for ft in modes:
+        for r in SHAFT_RATIOS:
+            ft = r * f
             sets = others._drive_doc({"base": "", "set": {}}, spec, ft, 0.0)["set"]
             out.append((f"shaft on {spec[0]} at {ft:.3g} Hz",
                         f"a compliant drive shaft on {spec[0]}, torsional mode {ft:.3g} Hz (5 % damping)",
@@ -318,8 +301,7 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
     lo, hi = min(modes), max(modes)
     return {**eff, "fundamental_hz": value,
             "confidence_basis": (f"a compliant shaft on {el}'s drive (torsional mode {value:.3g} Hz, a grid of "
-                                 f"{', '.join(f'{x:g}' for x in SHAFT_RATIOS)} x the first effect's fundamental "
-                                 f"and the effects' lines at {LINE_SHAFT_HZ[0]:g}-{LINE_SHAFT_HZ[1]:g} Hz) "
+                                 f"{', '.join(f'{x:g}' for x in SHAFT_RATIOS)} x the first effect's fundamental) "
                                  f"carries the periodic effects' lines between the tension zones as the data do: "
                                  f"{scores}"),
             "parameters": {"torsional_frequency": {"estimated": value, "unit": "Hz", "range": [lo, hi]},

@@ -460,44 +460,6 @@ def test_a_form_that_gives_up_anything_must_gain_one_percent():
     assert structure._small_trade(cur, score(cur), big, score(big)) is None
 
 
-def test_shaft_forms_sit_on_the_grid_and_on_the_effects_lines_in_band(monkeypatch):
-    """structure.shaft_forms: SHAFT_RATIOS x the first effect's fundamental, and every
-    line of every effect (order j with a coefficient, j x its fundamental x (1 + kappa))
-    inside LINE_SHAFT_HZ that lies more than LINE_SHAFT_SEP from the modes already
-    taken. Independent seed-46 c24: the leader's 5.16 Hz shaft sat under the unwind's
-    order 6 at 5.23 Hz, far above the grid's 0.52-1.31 Hz."""
-    from types import SimpleNamespace
-
-    import numpy as np
-
-    from webline.diagnosis import others, structure
-
-    f_u, f_l = 0.8711, 0.9102 / 1.01          # the leader's speed with kappa 1 %: 0.9102 Hz
-    ctx = SimpleNamespace(freq={"unwind": f_u, "sw_leader": f_l}, kappa={"sw_leader": 0.01})
-    d = SimpleNamespace(fit_ctx=lambda: [ctx], orders_for=lambda c, key: [1])
-
-    def X(orders):
-        x = np.zeros(8, complex)
-        x[[o - 1 for o in orders]] = 1e-4
-        return x
-
-    effs = [(SimpleNamespace(key="unwind"), X([3, 4, 6]), {}),
-            (SimpleNamespace(key="sw_leader"), X([2, 3, 5]), {})]
-    monkeypatch.setattr(others, "drive_candidates", lambda d: [("sw_leader", 0.1, ("inertia", 0.1)),
-                                                               ("unwind", 2.0, ("core_inertia", 0.05))])
-    monkeypatch.setattr(others, "non_ideal_drives", lambda d: set())
-    forms = structure.shaft_forms(d, effs)
-    assert {f[3][0] for f in forms} == {"sw_leader"}           # shafts on driven rollers only
-    modes = sorted(f[3][2] for f in forms)
-    # leader order 2 (1.82 Hz) is under 2 Hz; its order 3 (2.73 Hz) lies within 5 % of the unwind's 2.61 Hz
-    want = sorted([r * f_u for r in structure.SHAFT_RATIOS] + [o * f_u for o in (3, 4, 6)] + [5 * 0.9102])
-    assert np.allclose(modes, want, rtol=1e-9), (modes, want)
-    # no effect, no form; the grid alone when every line is out of band
-    assert structure.shaft_forms(d, []) == []
-    low = [(SimpleNamespace(key="unwind"), X([1, 2]), {})]
-    assert sorted(f[3][2] for f in structure.shaft_forms(d, low)) == sorted(r * f_u for r in structure.SHAFT_RATIOS)
-
-
 def test_a_shaft_form_must_fit_ten_percent_better_than_the_rigid_forms_with_its_sources():
     """Shaft forms (structure.shaft_forms) compete with the rigid forms that hold the
     same sources, simulated or only predicted. Seed-4 c05: with one idler and the
