@@ -191,7 +191,7 @@ def shaft_forms(d, effs):
     return out
 
 
-def readmit_orders(d, effs):
+def readmit_orders(effs):
     """The orders the data show on a screened effect's angle that its estimate in the
     layout's form left at zero (:func:`diagnosis.pipeline.left_out_orders`), and the
     effects with those orders back at their per-order gain estimates: ({element: [orders]},
@@ -613,9 +613,9 @@ def screen(d):
         form = name
         if readmit:
             # the full set with orders the layout's form left out: a set of its own, not "without"
-            shown = "; ".join(f"{el} order{'s' if len(js) > 1 else ''} {', '.join(map(str, js))}"
+            label = "; ".join(f"{el} order{'s' if len(js) > 1 else ''} {', '.join(map(str, js))}"
                               for el, js in readmit.items())
-            name, desc = f"{name} + {shown}", f"{desc}; with the orders the data show back in ({shown})"
+            name, desc = f"{name} + {label}", f"{desc}; with the orders the data show back in ({label})"
         elif use is not effs:
             # a swap onto a secondary source's element keeps that element: without the others
             rest = [el for el in sec_els if not swap or el != swap[1]]
@@ -736,7 +736,7 @@ def screen(d):
         stage_a_one(name, desc, sets)
     # ... and with the orders the data show that the layout's form left out: the fit in the
     # wrong form drops the order the line's form carries (independent seed-48 c14)
-    shown, effs_r = readmit_orders(d, effs)
+    shown, effs_r = readmit_orders(effs)
     if shown:
         for name, desc, sets in alts:
             if name not in drive_forms:

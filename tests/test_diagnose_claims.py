@@ -425,7 +425,7 @@ def test_the_structure_screen_asks_every_form_for_the_orders_the_layouts_form_le
     b2 = dict(b, X=whole, cand=SimpleNamespace(element="idler_u1"))
     effs = [(b["cand"], X, {"ranked": [b]}), (b2["cand"], whole, {"ranked": [b2]}),
             (SimpleNamespace(element="roller9"), X.copy(), None)]
-    shown, effs_r = structure.readmit_orders(None, effs)
+    shown, effs_r = structure.readmit_orders(effs)
     assert shown == {"unwind": [1]}              # order 2: z 12 over 2 runs is not shown
     X_r = effs_r[0][1]
     assert X_r[0] == pytest.approx(Xt[0], rel=1e-9) and X_r[1] == 0 and X_r[2] == X[2]
