@@ -607,16 +607,20 @@ def screen(d):
     # score (the alternative's nominal residual minus the harmonic energy X1 explains)
     stage_a = []
     nominal_of = {}
+    # the effects with the orders the layout's form left out put back (readmit_orders)
+    shown, effs_r = readmit_orders(effs)
 
     def stage_a_one(name, desc, sets, use=None, swap=None, readmit=None):
         use = effs if use is None else use
         form = name
         if readmit:
-            # the full set with orders the layout's form left out: a set of its own, not "without"
+            # a set with orders the layout's form left out: a set of its own
             label = "; ".join(f"{el} order{'s' if len(js) > 1 else ''} {', '.join(map(str, js))}"
                               for el, js in readmit.items())
             name, desc = f"{name} + {label}", f"{desc}; with the orders the data show back in ({label})"
-        elif use is not effs:
+        # without the secondary sources: the parsimonious set (with orders taken back or not)
+        without = use is not effs and not (readmit and use is effs_r)
+        if without:
             # a swap onto a secondary source's element keeps that element: without the others
             rest = [el for el in sec_els if not swap or el != swap[1]]
             sw = f", {swap[1]} in the place of {swap[0]}" if swap else ""
@@ -626,7 +630,7 @@ def screen(d):
         entry = {"name": name, "form": form, "description": desc, "set": sets}
         if readmit:
             entry["readmitted"] = {el: list(js) for el, js in readmit.items()}
-        elif use is not effs:
+        if without:
             entry["without"] = list(sec_els)
         if swap:
             entry["swap"] = {"replaced": swap[0], "by": swap[1]}
@@ -736,7 +740,6 @@ def screen(d):
         stage_a_one(name, desc, sets)
     # ... and with the orders the data show that the layout's form left out: the fit in the
     # wrong form drops the order the line's form carries (independent seed-48 c14)
-    shown, effs_r = readmit_orders(effs)
     if shown:
         for name, desc, sets in alts:
             if name not in drive_forms:
@@ -846,11 +849,17 @@ def screen(d):
     # leakage through the S-wrap hangs on what a data sheet leaves open (the leader's inertia,
     # the current loops' lags); a real second source's own phase and amplitude no such line gives
     if sec_fes and f_best is not None:
-        variants = [(effs_p, None)]
+        variants = [(effs_p, None, None)]
+        # ... with the orders taken back too: the lines carry the form's error as the forms do
+        # (independent seed-47 c17: the line chosen held sw_leader's order 1 at 22 um for 53 um,
+        # left out in the layout's form)
+        shown_p = {el: js for el, js in shown.items() if el not in sec_els}
+        if shown_p:
+            variants.append(([e for e in effs_r if all(e[2] is not fe for fe in sec_fes)], None, shown_p))
         sw = min((x[0] for x in pars_a if "swap" in x[0] and x[0]["form"] == f_best.get("form")),
                  key=lambda e: e["predicted_score"], default=None)
         if sw is not None:
-            variants.append((sw["_use"], (sw["swap"]["replaced"], sw["swap"]["by"])))
+            variants.append((sw["_use"], (sw["swap"]["replaced"], sw["swap"]["by"]), None))
         _tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, to_b)
     # the drive forms in that form too, each simulated: a shaft passes the lines between the
     # zones in the form the line has, and the linear prediction ranks such combinations no
@@ -1037,7 +1046,8 @@ def _tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, t
     """The set without the secondary sources in ``n`` lines drawn within the data sheet's
     tolerances (:func:`diagnosis.transfer.members`, seeded: repeatable) around the full set's
     best rigid form ``f_best``; ``variants``: [(sources, swap or None)], the set as it is and
-    its best swap in that form. Each predicted (stage A); per variant the best
+    its best swap in that form, and the set with the orders the layout's form left out taken
+    back (:func:`readmit_orders`; a variant's third item). Each predicted (stage A); per variant the best
     :data:`TOLERANCE_SIMULATED` simulated (stage B) and so judged by :func:`_parsimony` like
     every other form.
     Independent seed-33 c07: the phantom idler_u1 (30 um beside the truth's idler_r1, 125 um,
@@ -1048,11 +1058,11 @@ def _tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, t
     base = layout_edit._plain_base(d.model.copy_doc())
     drawn = [[] for _ in variants]
     for k, m in enumerate(transfer.members(base, form_doc, n=n), start=1):
-        for (use, swap), got in zip(variants, drawn):
+        for (use, swap, back), got in zip(variants, drawn):
             n1 = len(stage_a)
             stage_a_one(tolerance_line_name(f_best["form"], k),
                         f"{f_best['description']}; a line within the data sheet's tolerances (draw {k} of {n})",
-                        {**m, **f_best["set"]}, use, swap=swap)
+                        {**m, **f_best["set"]}, use, swap=swap, readmit=back)
             if len(stage_a) > n1:
                 stage_a[-1][0]["tolerance_line"] = {"draw": k, "of": n, "set": m}
                 got.append(stage_a[-1])
