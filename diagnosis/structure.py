@@ -613,20 +613,11 @@ def screen(d):
     def stage_a_one(name, desc, sets, use=None, swap=None, readmit=None):
         use = effs if use is None else use
         form = name
-        if readmit:
-            # a set with orders the layout's form left out: a set of its own
-            label = "; ".join(f"{el} order{'s' if len(js) > 1 else ''} {', '.join(map(str, js))}"
-                              for el, js in readmit.items())
-            name, desc = f"{name} + {label}", f"{desc}; with the orders the data show back in ({label})"
         # without the secondary sources: the parsimonious set (with orders taken back or not)
         without = use is not effs and not (readmit and use is effs_r)
-        if without:
-            # a swap onto a secondary source's element keeps that element: without the others
-            rest = [el for el in sec_els if not swap or el != swap[1]]
-            sw = f", {swap[1]} in the place of {swap[0]}" if swap else ""
-            wo = f", without {', '.join(rest)}" if rest else ""
-            name = f"{name}{sw}{wo}"
-            desc = f"{desc}{sw}{wo}"
+        # a swap onto a secondary source's element keeps that element: without the others
+        rest = [el for el in sec_els if not swap or el != swap[1]] if without else []
+        name, desc = set_label(name, desc, readmit, rest, swap if without else None)
         entry = {"name": name, "form": form, "description": desc, "set": sets}
         if readmit:
             entry["readmitted"] = {el: list(js) for el, js in readmit.items()}
@@ -1035,6 +1026,20 @@ def screen(d):
             r["harmonics_amplitude_m"] = {el: [float(abs(x)) for x in X] for el, X in r["X"].items()}
         for k in ("doc", "sims", "X", "_nom", "_use"):
             r.pop(k, None)
+
+
+def set_label(name, desc, readmit=None, without=(), swap=None):
+    """The name and description of a screened set: the form ``name`` (``desc``), with the
+    orders taken back (``readmit``, {element: [orders]}, :func:`readmit_orders`), the
+    member in a primary's place (``swap``, (replaced, by)) and the secondary sources left
+    out (``without``), in that order."""
+    if readmit:
+        label = "; ".join(f"{el} order{'s' if len(js) > 1 else ''} {', '.join(map(str, js))}"
+                          for el, js in readmit.items())
+        name, desc = f"{name} + {label}", f"{desc}; with the orders the data show back in ({label})"
+    sw = f", {swap[1]} in the place of {swap[0]}" if swap else ""
+    wo = f", without {', '.join(without)}" if without else ""
+    return f"{name}{sw}{wo}", f"{desc}{sw}{wo}"
 
 
 def tolerance_line_name(form, k):

@@ -436,6 +436,23 @@ def test_the_structure_screen_asks_every_form_for_the_orders_the_layouts_form_le
     assert h[1]["left_out"] and h[1]["amplitude"] == pytest.approx(abs(X_r[0]))
 
 
+def test_a_screened_set_is_named_by_its_form_orders_taken_back_swap_and_sources_left_out():
+    """The set labels the report's structure table shows. A line within the data sheet's
+    tolerances is tried with the orders taken back *and* without the secondary sources
+    (independent seed-47 c17: 'feedforward reference + line 11 within the data sheet +
+    sw_leader order 1, without roller9' was chosen), so both parts must be in its name."""
+    from webline.diagnosis import structure
+
+    assert structure.set_label("feedforward none", "no ff") == ("feedforward none", "no ff")
+    name, desc = structure.set_label("line 11", "a line", {"roller19": [4, 6], "sw_leader": [1]}, ["roller9"])
+    assert name == "line 11 + roller19 orders 4, 6; sw_leader order 1, without roller9"
+    assert desc == "a line; with the orders the data show back in (roller19 orders 4, 6; sw_leader order 1), without roller9"
+    name, _ = structure.set_label("feedforward reference", "", None, ["roller9"], ("roller19", "idler_r1"))
+    assert name == "feedforward reference, idler_r1 in the place of roller19, without roller9"
+    # a swap onto the only secondary source leaves none out
+    assert structure.set_label("f", "", None, [], ("roller19", "roller9"))[0] == "f, roller9 in the place of roller19"
+
+
 def test_a_form_that_gives_up_anything_must_gain_one_percent():
     """Seed-4 c08 of the independent family: "feedforward reference" against the
     layout's own form lowered lc19 from 1.0046 to 0.9989 and raised lc9 from 1.0098
