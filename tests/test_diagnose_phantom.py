@@ -441,8 +441,9 @@ def test_a_readmitted_effect_is_checked_alone_in_its_form(monkeypatch):
 
 
 def test_the_set_without_a_secondary_source_is_tried_in_lines_within_the_data_sheet():
-    """structure._tolerance_lines: the set without the secondary sources, as it is and as
-    its best swap, is tried in TOLERANCE_LINES lines drawn within the data sheet's
+    """structure._tolerance_lines: the set without the secondary sources, as it is, as
+    its best swap and with the orders the layout's form left out taken back (independent
+    seed-47 c17), is tried in TOLERANCE_LINES lines drawn within the data sheet's
     tolerances around the full set's best rigid form (the form's own keys kept, the draws
     repeatable), each predicted, per variant the best TOLERANCE_SIMULATED simulated and
     queued with the sets parsimony judges."""
@@ -458,16 +459,17 @@ def test_the_set_without_a_secondary_source_is_tried_in_lines_within_the_data_sh
     f_best = {"form": "feedforward none + web damping 2 ms", "description": "no feed forward; damped web",
               "set": form_set}
     zero = d.model.copy_doc()
-    as_is, swapped = [("the primary source",)], [("another member of its tie",)]
-    variants = [(as_is, None), (swapped, ("idler_r1", "roller19"))]
+    as_is, swapped, back = [("the primary source",)], [("another member of its tie",)], [("orders back",)]
+    variants = [(as_is, None, None), (swapped, ("idler_r1", "roller19"), None), (back, None, {"sw_leader": [1]})]
     n = 4
-    # predicted scores, draw by draw, the set as it is then its swap
-    scores = iter([5.0, 0.5, 3.0, 0.9, 4.0, 0.1, 1.0, 0.7])
+    # predicted scores, draw by draw: the set as it is, its swap, with the orders taken back
+    scores = iter([5.0, 0.5, 2.0, 3.0, 0.9, 0.3, 4.0, 0.1, 1.5, 1.0, 0.7, 0.2])
     calls, stage_a, simulated, to_b = [], [], [], [("already queued",)]
 
-    def stage_a_one(name, desc, sets, use=None, swap=None):
-        calls.append((name, sets, use, swap))
-        stage_a.append(({"name": f"{name} {swap}", "form": name, "set": sets, "predicted_score": next(scores)},
+    def stage_a_one(name, desc, sets, use=None, swap=None, readmit=None):
+        calls.append((name, sets, use, swap, readmit))
+        label = f"{name} {swap}" + (f" {readmit}" if readmit else "")
+        stage_a.append(({"name": label, "form": name, "set": sets, "predicted_score": next(scores)},
                         None, None, None))
 
     def stage_b(entry, alt0, X1s, Gs):
@@ -476,16 +478,18 @@ def test_the_set_without_a_secondary_source_is_tried_in_lines_within_the_data_sh
     structure._tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, to_b, n=n)
     drawn = transfer.members(layout_edit._plain_base(d.model.copy_doc()), structure._apply(zero, form_set), n=n)
     names = [structure.tolerance_line_name(f_best["form"], k) for k in range(1, n + 1)]
-    assert [(c[0], c[2], c[3]) for c in calls] == [(nm, u, sw) for nm in names for u, sw in variants]
-    for (name, sets, use, swap), (entry, *_), i in zip(calls, stage_a, range(2 * n)):
-        m = drawn[i // 2]
+    assert [(c[0], c[2], c[3], c[4]) for c in calls] == [(nm, *v) for nm in names for v in variants]
+    for (name, sets, use, swap, readmit), (entry, *_), i in zip(calls, stage_a, range(3 * n)):
+        m = drawn[i // 3]
         # the form's keys are the form's: a draw leaves them to it
         assert sets == {**m, **form_set} and not set(m) & set(form_set)
         assert any("inertia" in key or "mass" in key for key in m)   # a line, not the form again
-        assert entry["tolerance_line"] == {"draw": i // 2 + 1, "of": n, "set": m}
-    # per variant the best predicted: as it is draws 4 and 2 (1.0, 3.0); swapped draws 3 and 1 (0.1, 0.5)
+        assert entry["tolerance_line"] == {"draw": i // 3 + 1, "of": n, "set": m}
+    # per variant the best predicted: as it is draws 4 and 2 (1.0, 3.0); swapped draws 3 and 1
+    # (0.1, 0.5); with the orders back draws 4 and 2 (0.2, 0.3)
     best = [f"{names[3]} None", f"{names[1]} None", f"{names[2]} ('idler_r1', 'roller19')",
-            f"{names[0]} ('idler_r1', 'roller19')"]
+            f"{names[0]} ('idler_r1', 'roller19')", f"{names[3]} None {{'sw_leader': [1]}}",
+            f"{names[1]} None {{'sw_leader': [1]}}"]
     assert structure.TOLERANCE_SIMULATED == 2
     assert simulated == best
     assert [x[0]["name"] for x in to_b[1:]] == best and to_b[0] == ("already queued",)
