@@ -1050,9 +1050,9 @@ def tolerance_line_name(form, k):
 def _tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, to_b, n=TOLERANCE_LINES):
     """The set without the secondary sources in ``n`` lines drawn within the data sheet's
     tolerances (:func:`diagnosis.transfer.members`, seeded: repeatable) around the full set's
-    best rigid form ``f_best``; ``variants``: [(sources, swap or None)], the set as it is and
-    its best swap in that form, and the set with the orders the layout's form left out taken
-    back (:func:`readmit_orders`; a variant's third item). Each predicted (stage A); per variant the best
+    best rigid form ``f_best``; ``variants``: [(sources, swap or None, orders taken back or
+    None)], the set as it is, its best swap in that form, and the set with the orders the
+    layout's form left out taken back (:func:`readmit_orders`). Each predicted (stage A); per variant the best
     :data:`TOLERANCE_SIMULATED` simulated (stage B) and so judged by :func:`_parsimony` like
     every other form.
     Independent seed-33 c07: the phantom idler_u1 (30 um beside the truth's idler_r1, 125 um,
