@@ -844,9 +844,9 @@ def screen(d):
         # ... with the orders taken back too: the lines carry the form's error as the forms do
         # (independent seed-47 c17: the line chosen held sw_leader's order 1 at 22 um for 53 um,
         # left out in the layout's form)
-        shown_p = {el: js for el, js in shown.items() if el not in sec_els}
+        shown_p, effs_pr = readmit_orders(effs_p)
         if shown_p:
-            variants.append(([e for e in effs_r if all(e[2] is not fe for fe in sec_fes)], None, shown_p))
+            variants.append((effs_pr, None, shown_p))
         sw = min((x[0] for x in pars_a if "swap" in x[0] and x[0]["form"] == f_best.get("form")),
                  key=lambda e: e["predicted_score"], default=None)
         if sw is not None:
