@@ -942,7 +942,8 @@ def markdown(summary, results=None, meta=None):
         rv = dd.get(k) or {}
         if k in DRIVE_KINDS and pk["true"] and rv.get("unknown", 0) < pk["true"]:
             basis = ("measured, else a torque reversal in a fit run" if k == "backlash"
-                     else "truth with and without it against the measurement error")
+                     else "truth with and without it against the measurement error, the ripple's level and "
+                     "the inertia profiled out")
             note = (f"; {rv.get('true', 0)} of the {pk['true']} hidden detectable ({basis}), "
                     f"{rv.get('matched', 0)} of those found")
             if rv.get("unknown"):

@@ -167,11 +167,12 @@ def rescore(out, results_path=None, family="own"):
     from webline.diagnosis import benchmark as B
     work = family_folder(out, family)
     folders = sorted(p for p in (work / "cases").glob("*") if (p / "truth" / "truth.json").exists())
-    if family == "independent":  # cases made before detectability was measured: measure it now
+    if family == "independent":  # cases made before detectability (a shaft's profiled) was measured: now
         from webline.diagnosis import benchmark_independent as BI
         for p in folders:
             tr = json.loads((p / "truth" / "truth.json").read_text())
-            if any("detectable" not in e for e in tr["effects"]) and tr.get("runs"):
+            if any("detectable" not in e or (e["kind"] == "compliance" and "deflection_profiled" not in e["detectable"])
+                   for e in tr["effects"]) and tr.get("runs"):
                 try:
                     BI.add_detectability(p)
                 except Exception as exc:  # noqa: BLE001 - recorded as not known, the rescore goes on

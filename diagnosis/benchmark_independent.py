@@ -56,7 +56,9 @@ torque ripple, the SNR counted is what a diagnosis could reach without the
 ripple's sequence: the matched filter on the effect's deterministic part (truth
 with and without it, both without ripple) or the energy detector's deflection
 on the ripple-rung part's spectrum, whichever is larger; for a run-out the
-ripple-rung response is part of the noise.
+ripple-rung response is part of the noise. For a shaft that deflection is
+taken with the ripple's level and the element's inertia profiled out
+(:func:`profiled_deflection`): what is left is the mode's shape.
 """
 import copy
 import json
@@ -942,6 +944,36 @@ def stochastic_deflection(delta, noise, fs, band):
     return float(np.sqrt(np.sum((P[m] / np.maximum(S[m], 1e-300)) ** 2))) if m.any() else 0.0
 
 
+def profiled_deflection(with_r, withouts_r, noise, fs, band):
+    """:func:`stochastic_deflection` of a shaft's ripple-rung response ``with_r``
+    (the truth's, without its deterministic part) against the rigid line's,
+    ``withouts_r``, with what no diagnosis knows profiled out: the ripple's level
+    (the rigid response's power scaled to fit, least squares per bin weighted by
+    the error's power) and the element's inertia within the data sheet
+    (each rigid response in ``withouts_r`` tried, the least deflection kept).
+    What is left is the mode's shape. The plain deflection counts the rise of power
+    a raised ripple makes in the rigid line too (independent seed-45 c21: the
+    leader's 14.8 Hz shaft at a deflection of 200; the truth's exact model fitted
+    the residual spectrum's 8-32 Hz band only 18 % better than the same line with
+    a rigid leader carrying its load-side inertia, below the 25 % a shaft needs)."""
+    n = len(with_r)
+    if n < 8:
+        return 0.0
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    m = (f >= band[0]) & (f <= band[1]) & (f > 0)
+    if not m.any():
+        return 0.0
+    S = np.maximum(_noise_psd(np.asarray(noise, float) - np.mean(noise), fs, n)[m], 1e-300)
+    Pw = _noise_psd(np.asarray(with_r, float) - np.mean(with_r), fs, n)[m] / S
+    best = None
+    for wo in withouts_r:
+        Po = _noise_psd(np.asarray(wo, float) - np.mean(wo), fs, n)[m] / S
+        a = max(0.0, float(np.dot(Pw, Po) / np.dot(Po, Po))) if np.dot(Po, Po) > 0 else 0.0
+        dfl = float(np.sqrt(np.sum((Pw - a * Po) ** 2)))
+        best = dfl if best is None else min(best, dfl)
+    return best if best is not None else 0.0
+
+
 def near_zero_windows(t, tau, half=REVERSAL_WINDOW_S, eps=REVERSAL_EPS_NM, rel=REVERSAL_REL):
     """(mask, episodes): samples within ``half`` of a time the drive torque is at
     zero - within max(eps, rel * its range) of it, or changing sign between two
@@ -1009,8 +1041,9 @@ def _combine(per):
     snr = math.sqrt(sum(v["snr_where"] ** 2 for v in per))
     snr_all = math.sqrt(sum(v["snr_all"] ** 2 for v in per))
     extra = {}
-    if all("deflection_where" in v for v in per):
-        extra["deflection_where"] = math.sqrt(sum(v["deflection_where"] ** 2 for v in per))
+    for k in ("deflection_where", "deflection_profiled"):
+        if all(k in v for v in per):
+            extra[k] = math.sqrt(sum(v[k] ** 2 for v in per))
     if all("snr_where_without_ripple" in v for v in per):
         extra["snr_where_without_ripple"] = math.sqrt(sum(v["snr_where_without_ripple"] ** 2 for v in per))
     # detectable: the effect's own signature (where it acts) stands out of the error; visible
@@ -1019,7 +1052,11 @@ def _combine(per):
     # no diagnosis has: what it can know is the effect's deterministic part (the truth with
     # and without it, both without ripple; a matched filter on a waveform a model can
     # simulate) or the ripple-rung part's spectrum (an energy detector)
-    if "snr_where_without_ripple" in extra:
+    if "deflection_profiled" in extra:
+        basis = max(extra["snr_where_without_ripple"], extra["deflection_profiled"])
+        how = ("deterministic part's SNR or the mode's spectral deflection (the ripple's sequence and level, "
+               "the element's inertia within the data sheet, unknown)")
+    elif "snr_where_without_ripple" in extra:
         basis = max(extra["snr_where_without_ripple"], extra.get("deflection_where", 0.0))
         how = "deterministic part's SNR or spectral deflection (the ripple's sequence is unknown)"
     else:
@@ -1046,6 +1083,13 @@ def _layout_without(truth, line_doc, line_path, index):
     return {"base": str(Path(line_path).resolve()), "set": s}
 
 
+def _layout_light(truth, line_path, e):
+    """Set block of the truth layout with effect ``e``'s drive made rigid and its
+    element left with the load-side inertia alone (the motor's share dropped)."""
+    key = f"drives.speed_loops.{e['element']}.drive"
+    return {"base": str(Path(line_path).resolve()), "set": {k: v for k, v in truth["set"].items() if k != key}}
+
+
 def detectability(truth, folder, *, simulate=None):
     """For each hidden effect of a case: simulate the truth with and without
     it (the truth engine, :func:`simulate_truth`) in every fit run, regenerate the
@@ -1070,6 +1114,10 @@ def detectability(truth, folder, *, simulate=None):
         for i, e in enumerate(truth["effects"]):
             periodic = e["kind"] in B.PERIODIC
             wo = B.write_yaml(Path(tmp) / f"without{i}.yaml", _layout_without(truth, line_doc, line_path, i))
+            # a shaft's rigid alternative at the inertia a data sheet allows too: the element
+            # keeps its load-side inertia alone (the motor's share is within the -30 % tolerance)
+            light = B.write_yaml(Path(tmp) / f"light{i}.yaml", _layout_light(truth, line_path, e)) \
+                if e["kind"] == "compliance" else None
             per, runs = [], []
             for r in truth["runs"]:
                 if r["holdout"]:
@@ -1095,12 +1143,21 @@ def detectability(truth, folder, *, simulate=None):
                 col = f"{e['element']}_speed_pi.tau"
                 tau = np.asarray(res[col], float)[settle] if col in res else None
                 rec = {"run": r["name"], "sensors": {}}
+                lc_light = None
                 for lc in sorted(facts["_sensors"]):
                     y = np.asarray(res[f"{lc}.T"], float)
                     m, _ = measure(tt, np.asarray(measured[f"{lc}.T"], float), run, rng)  # the case's draws
                     v = effect_visibility(e["kind"], tt[settle], y[settle], np.asarray(res0[f"{lc}.T"], float)[settle],
                                           (m - y)[settle], run.fs_hz, tau=tau,
                                           torsional_hz=(e.get("drive") or {}).get("torsional_hz"))
+                    if quiet is not None and e["kind"] == "compliance":
+                        if lc_light is None:
+                            lc_light = (simulate(load_system(light, ov), t), simulate(load_system(light, ov0), t))
+                        q = lambda a, b: (np.asarray(a[f"{lc}.T"], float) - np.asarray(b[f"{lc}.T"], float))[settle]
+                        ft = e["drive"]["torsional_hz"]
+                        v["deflection_profiled"] = profiled_deflection(
+                            q(res, quiet[0]), [q(res0, quiet[1]), q(*lc_light)], (m - y)[settle], run.fs_hz,
+                            (ft * (1 - BAND_REL), ft * (1 + BAND_REL)))
                     if quiet is not None:
                         v["snr_where_without_ripple"] = effect_visibility(
                             e["kind"], tt[settle], np.asarray(quiet[0][f"{lc}.T"], float)[settle],

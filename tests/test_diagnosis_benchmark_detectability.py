@@ -81,6 +81,45 @@ def test_stochastic_deflection_of_a_random_difference_is_its_power_ratio_per_bin
     assert BI.stochastic_deflection(np.zeros(len(t)), noise, FS, band) == 0.0
 
 
+def _mode(x, f0, zeta=0.05):
+    """``x`` through a two-mass mode's resonance at ``f0`` (unit gain at DC)."""
+    from scipy import signal
+    w = 2 * math.pi * f0
+    b, a = signal.bilinear([w * w], [1.0, 2 * zeta * w, w * w], FS)
+    return signal.lfilter(b, a, x)
+
+
+def test_profiled_deflection_counts_the_modes_shape_not_the_ripples_level():
+    # the rigid line's ripple response at a level no diagnosis knows: any multiple of it
+    # leaves no shape to detect, while the plain deflection counts the rise of power
+    noise = _noise(len(t), FS, 0.3, seed=6)
+    rigid = _noise(len(t), FS, 0.3, seed=7)
+    band = (3.5, 6.5)
+    assert BI.profiled_deflection(3.0 * rigid, [rigid], noise, FS, band) == pytest.approx(0.0, abs=1e-6)
+    assert BI.stochastic_deflection(2.0 * rigid, noise, FS, band) > 10 * BI.DETECT_SNR
+    # the same ripple through a mode at 5 Hz (10 % damping ratio): a peak whose shape no
+    # scaling of the rigid response makes
+    shaft = _mode(rigid, 5.0, zeta=0.1)
+    d = BI.profiled_deflection(shaft, [rigid], noise, FS, band)
+    assert d > 10 * BI.DETECT_SNR
+    # the least deflection over the rigid alternatives: one of them with that shape is enough
+    assert BI.profiled_deflection(shaft, [rigid, 0.5 * shaft], noise, FS, band) == pytest.approx(0.0, abs=1e-6)
+    assert BI.profiled_deflection(shaft, [rigid, _mode(rigid, 5.3, zeta=0.1)], noise, FS, band) < 0.8 * d
+    # a lower ripple makes the same shape less visible against the error: quadratic in the level
+    assert BI.profiled_deflection(0.1 * shaft, [rigid], noise, FS, band) == pytest.approx(0.01 * d, rel=1e-6)
+
+
+def test_a_shafts_detectable_value_is_the_profiled_deflection_where_recorded():
+    rec = {"snr_where": 9.0, "snr_all": 10.0, "snr_where_without_ripple": 0.6, "deflection_where": 40.0,
+           "deflection_profiled": 2.0}
+    c = BI._combine([rec])
+    assert c["detect_value"] == 2.0 and not c["detectable"] and c["deflection_where"] == 40.0
+    assert "level" in c["detect_basis"] and "inertia" in c["detect_basis"]
+    assert BI._combine([dict(rec, snr_where_without_ripple=6.0)])["detect_value"] == 6.0
+    # a record without the profiled value (cases made before it) keeps the plain deflection
+    assert BI._combine([{k: v for k, v in rec.items() if k != "deflection_profiled"}])["detect_value"] == 40.0
+
+
 def test_backlash_visibility_needs_a_torque_reversal():
     noise = _noise(len(t), FS, 0.3, seed=2)
     y0 = np.full(len(t), 100.0)
@@ -126,6 +165,9 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
             assert v["delta_rms_N"] > 0 and math.isfinite(v["snr_where"])
             assert v["deflection_where"] >= 0 and math.isfinite(v["snr_where_without_ripple"])
     assert "deflection_where" in det and "snr_where_without_ripple" in det
+    # the shaft's detectable value profiles out the ripple's level and the element's inertia
+    assert 0 <= det["deflection_profiled"] and det["detect_value"] == max(det["deflection_profiled"],
+                                                                          det["snr_where_without_ripple"])
     el = truth["effects"][i]["element"]
     wo = BI._layout_without(truth, doc, folder / "blind" / "line.yaml", i)["set"]
     pset, _ = BI.param_set(BI.TruthModel(**truth["model"]), doc)
@@ -326,6 +368,15 @@ def test_rescore_measures_detectability_of_cases_made_before(tmp_path):
                                                                            rel=1e-9)
     ts = json.loads(out.read_text())["families"]["independent"]["target_scores"]
     assert ts["drive"]["true"] == 1 and ts["drive"]["unknown"] == 0
+    # a shaft recorded before its profiled deflection was measured gets it too
+    prof = made["effects"][i]["detectable"]["deflection_profiled"]
+    del new["effects"][i]["detectable"]["deflection_profiled"]
+    p.write_text(json.dumps(new))
+    assert benchmark_cmd.main(["--family", "independent", "--rescore", "--out", str(tmp_path),
+                               "--results", str(out)]) == 0
+    again = json.loads(p.read_text())["effects"][i]["detectable"]
+    assert again["deflection_profiled"] == pytest.approx(prof, rel=1e-9)
+    assert again["detect_value"] == pytest.approx(made["effects"][i]["detectable"]["detect_value"], rel=1e-9)
 
 
 def test_a_found_shafts_mode_is_scored_against_the_truths_with_its_range():
