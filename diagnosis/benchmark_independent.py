@@ -890,6 +890,11 @@ REVERSAL_REL = 0.02       # ... or within this share of its range (as the diagno
 PSD_SMOOTH_HZ = 0.5       # noise PSD: the periodogram of the injected error smoothed over this width
 
 
+def shaft_band(torsional_hz):
+    """Where a compliance acts: f_t (1 -+ :data:`BAND_REL`)."""
+    return torsional_hz * (1 - BAND_REL), torsional_hz * (1 + BAND_REL)
+
+
 def _noise_psd(noise, fs, n_fft):
     """Per-bin noise power |N_k|^2 of one realisation, smoothed (moving mean over
     PSD_SMOOTH_HZ) so that it estimates the expected power of each bin."""
@@ -963,15 +968,19 @@ def profiled_deflection(with_r, withouts_r, noise, fs, band):
     m = (f >= band[0]) & (f <= band[1]) & (f > 0)
     if not m.any():
         return 0.0
-    S = np.maximum(_noise_psd(np.asarray(noise, float) - np.mean(noise), fs, n)[m], 1e-300)
-    Pw = _noise_psd(np.asarray(with_r, float) - np.mean(with_r), fs, n)[m] / S
-    best = None
-    for wo in withouts_r:
-        Po = _noise_psd(np.asarray(wo, float) - np.mean(wo), fs, n)[m] / S
-        a = max(0.0, float(np.dot(Pw, Po) / np.dot(Po, Po))) if np.dot(Po, Po) > 0 else 0.0
-        dfl = float(np.sqrt(np.sum((Pw - a * Po) ** 2)))
-        best = dfl if best is None else min(best, dfl)
-    return best if best is not None else 0.0
+    def band_psd(x):
+        x = np.asarray(x, float)
+        return _noise_psd(x - np.mean(x), fs, n)[m]
+
+    S = np.maximum(band_psd(noise), 1e-300)
+    Pw = band_psd(with_r) / S
+
+    def left(wo):   # what the rigid response, scaled to fit, leaves of the shaft's
+        Po = band_psd(wo) / S
+        pp = float(np.dot(Po, Po))
+        a = max(0.0, float(np.dot(Pw, Po)) / pp) if pp > 0 else 0.0
+        return float(np.sqrt(np.sum((Pw - a * Po) ** 2)))
+    return min((left(wo) for wo in withouts_r), default=0.0)
 
 
 def near_zero_windows(t, tau, half=REVERSAL_WINDOW_S, eps=REVERSAL_EPS_NM, rel=REVERSAL_REL):
@@ -1007,7 +1016,7 @@ def effect_visibility(kind, t, with_T, without_T, noise_T, fs, *, torsional_hz=N
     out = {"delta_rms_N": float(np.sqrt(np.mean(delta ** 2))), "noise_rms_N": float(np.sqrt(np.mean(noise ** 2))),
            "snr_all": snr_all}
     if kind == "compliance":
-        band = (torsional_hz * (1 - BAND_REL), torsional_hz * (1 + BAND_REL))
+        band = shaft_band(torsional_hz)
         snr, d, nn = whitened_snr(delta, noise, fs, band)
         out.update(where=f"{band[0]:.3g}-{band[1]:.3g} Hz", snr_where=snr, delta_rms_where_N=d,
                    noise_rms_where_N=nn, deflection_where=stochastic_deflection(delta, noise, fs, band))
@@ -1153,11 +1162,12 @@ def detectability(truth, folder, *, simulate=None):
                     if quiet is not None and e["kind"] == "compliance":
                         if lc_light is None:
                             lc_light = (simulate(load_system(light, ov), t), simulate(load_system(light, ov0), t))
-                        q = lambda a, b: (np.asarray(a[f"{lc}.T"], float) - np.asarray(b[f"{lc}.T"], float))[settle]
-                        ft = e["drive"]["torsional_hz"]
+
+                        def rung(rippled, still, lc=lc):   # the ripple-rung part of a sensor's tension
+                            return (np.asarray(rippled[f"{lc}.T"], float) - np.asarray(still[f"{lc}.T"], float))[settle]
                         v["deflection_profiled"] = profiled_deflection(
-                            q(res, quiet[0]), [q(res0, quiet[1]), q(*lc_light)], (m - y)[settle], run.fs_hz,
-                            (ft * (1 - BAND_REL), ft * (1 + BAND_REL)))
+                            rung(res, quiet[0]), [rung(res0, quiet[1]), rung(*lc_light)], (m - y)[settle],
+                            run.fs_hz, shaft_band(e["drive"]["torsional_hz"]))
                     if quiet is not None:
                         v["snr_where_without_ripple"] = effect_visibility(
                             e["kind"], tt[settle], np.asarray(quiet[0][f"{lc}.T"], float)[settle],
