@@ -243,6 +243,35 @@ def dead_zone_forms(d, sims, forms, names=("feedforward none", "feedforward refe
     return out
 
 
+KIND_NAMES = {"compliance": "a compliant shaft", "backlash": "a dead zone"}
+
+
+def kind_rivals(el, kind, as_well, drive_forms):
+    """The drive forms of another kind on drive ``el`` among ``as_well`` (the forms that fit
+    about as well as the chosen one): [{kind, form, score}], best first. A stiff shaft with a
+    dead zone that the swing crosses lets the roller run free between contacts, a coupling
+    as soft as a low torsional mode, so the two can pass the lines between the zones alike
+    (independent seed-47 c12: a true 2.8 deg leader dead zone, the leader shaft at 4.45 Hz
+    claimed, 0.136, the 1 deg dead zone 0.151, about as well)."""
+    out = {}
+    for r in as_well:
+        e, k, _ = drive_forms.get(r.get("form"), (None, None, None))
+        if e == el and k not in (None, kind) and (k not in out or r["score"] < out[k]["score"]):
+            out[k] = {"kind": k, "form": r["name"], "score": float(r["score"])}
+    return sorted(out.values(), key=lambda x: x["score"])
+
+
+def kind_rivals_text(el, kind, rivals, score=None):
+    """What the detail says when a drive form of another kind on ``el`` fits about as well
+    (``score``: the chosen form's sum of NRMSE^2)."""
+    if not rivals:
+        return ""
+    alt = " or ".join(f"{KIND_NAMES.get(x['kind'], x['kind'])} ('{x['form']}', sum of NRMSE^2 {x['score']:.4g}"
+                      + (f" against {score:.4g}" if score is not None else "") + ")" for x in rivals)
+    return (f"; {alt} fits about as well: whether {el}'s drive has {KIND_NAMES.get(kind, kind)} or "
+            f"{' or '.join(KIND_NAMES.get(x['kind'], x['kind']) for x in rivals)} is not identifiable from these runs")
+
+
 def _drive_effect(chosen, drive_forms, scored, cur_score):
     """The compliance or backlash a chosen drive form (``drive_forms``: form name -> (element,
     kind, torsional mode Hz or dead-zone width deg)) claims, as an effect of the report
@@ -267,6 +296,7 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
     as_well = [r for r in scored if r.get("form") in drive_forms
                and r["score"] <= chosen["score"] + AS_WELL * max(cur_score - chosen["score"], 1e-12)]
     same = sorted({r["form"] for r in as_well if r["form"] != chosen["form"]})
+    rivals = kind_rivals(el, kind, as_well, drive_forms)
     gain = (cur_score - chosen["score"]) / cur_score if cur_score > 0 else 0.0
     explains = ("sum of the load cells' NRMSE^2 over the fit runs (as a model form, with the effects"
                 + (f" it keeps, without {', '.join(chosen['without'])})" if chosen.get("without") else ")"))
@@ -282,7 +312,10 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
         "confidence": float(np.clip(1.0 - chosen["score"] / nxt, 0.0, 1.0)) if nxt > 0 else 0.0,
         "check": chosen.get("check"),
         "model_form": chosen["name"],
+        "kind_identifiable": not rivals,
     }
+    if rivals:
+        eff["kind_rivals"] = rivals
     if kind == "backlash":
         from webline.diagnosis import backlash
         return {**eff, "fundamental_hz": None,
@@ -292,7 +325,8 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
                 "parameters": {"backlash": {"estimated": math.radians(value), "unit": "rad", "identifiable": False},
                                "torsional_frequency": {"estimated": backlash.SHAFT_HZ, "unit": "Hz"}},
                 "detail": (f"{el} backlash, {value:g} deg dead zone (a model form of the structure screen; the "
-                           f"width is the form's, not estimated)")}
+                           f"width is the form's, not estimated)"
+                           + kind_rivals_text(el, kind, rivals, chosen["score"]))}
     # the mode is placed only as well as the shafts on this drive that fit about as well agree,
     # in whatever form they sit: the peak a shaft puts in the load cells moves with the loops
     # around it (independent seed-39 c21: a 13.56 Hz leader shaft peaked at 14.75 Hz in the
@@ -308,7 +342,7 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
                            "damping_ratio": {"estimated": 0.05, "unit": "1"}},
             "detail": (f"{el} compliance, torsional mode {value:.3g} Hz (a model form of the structure screen"
                        + (f"; shafts on {el} at {lo:.3g}-{hi:.3g} Hz fit about as well" if hi > lo else "")
-                       + ")")}
+                       + ")" + kind_rivals_text(el, kind, rivals, chosen["score"]))}
 
 
 def _apply(doc, sets):
@@ -982,8 +1016,10 @@ def screen(d):
                 f"effect's frequency) or with a tension set-point step would tell them apart")
             d.notes.append(unc[cand.element]["note"])
     if chosen is not results[0] and chosen.get("form") in drive_forms:
-        d.other = list(getattr(d, "other", []) or []) + [
-            _drive_effect(chosen, drive_forms, scored, cur_score)]
+        eff = _drive_effect(chosen, drive_forms, scored, cur_score)
+        d.other = list(getattr(d, "other", []) or []) + [eff]
+        if not eff["kind_identifiable"]:
+            d.notes.append(eff["detail"])
     d.structure["chosen"] = chosen.get("form", chosen["name"])
     if chosen.get("tolerance_line"):
         tl = chosen["tolerance_line"]

@@ -514,3 +514,38 @@ def test_a_line_within_the_data_sheet_must_fit_every_sensor_as_well_as_the_full_
     assert tolerance_line_refused({**r, "nrmse": {"lc9.T": 0.4, "lc19.T": edge}}, full) is None
     assert tolerance_line_refused({**r, "nrmse": {"lc9.T": 0.4, "lc19.T": 1.001 * edge}}, full)
     assert tolerance_line_refused({"form": "feedforward none", "nrmse": r["nrmse"]}, full) is None
+
+
+def test_a_drive_form_says_when_a_form_of_another_kind_on_its_drive_fits_about_as_well():
+    """A shaft and a dead zone on one drive can pass the lines between the zones alike
+    (independent seed-47 c12: a true leader dead zone, the leader shaft claimed at 0.136,
+    the dead zone 0.151): the claim then says its kind is not identifiable and names the
+    rival; a rival on another drive, or beyond 'about as well', does not count."""
+    from webline.diagnosis import structure
+    forms = {"ff none + shaft on sw_leader at 4.45 Hz": ("sw_leader", "compliance", 4.45),
+             "ff none + dead zone on sw_leader": ("sw_leader", "backlash", 1.0),
+             "ff ref + dead zone on sw_leader": ("sw_leader", "backlash", 1.0),
+             "ff none + dead zone on rewind": ("rewind", "backlash", 1.0)}
+    rigid = {"name": "ff none", "form": "ff none", "score": 0.1676}
+    chosen = {"name": "ff none + shaft on sw_leader at 4.45 Hz", "form": "ff none + shaft on sw_leader at 4.45 Hz",
+              "score": 0.1355}
+    # the layout's form 0.397: 'about as well' up to 0.1355 + 0.1 x 0.2615 = 0.1617
+    dz = {"name": "ff none + dead zone on sw_leader", "form": "ff none + dead zone on sw_leader", "score": 0.1512}
+    dz2 = {"name": "ff ref + dead zone on sw_leader", "form": "ff ref + dead zone on sw_leader", "score": 0.1590}
+    far = {"name": "ff ref + dead zone on sw_leader, far", "form": "ff ref + dead zone on sw_leader", "score": 0.1620}
+    rw = {"name": "ff none + dead zone on rewind", "form": "ff none + dead zone on rewind", "score": 0.1400}
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, dz2, dz, far, rw], 0.397)
+    assert eff["kind"] == "compliance" and eff["kind_identifiable"] is False
+    # one rival a kind, its best form first
+    assert eff["kind_rivals"] == [{"kind": "backlash", "form": "ff none + dead zone on sw_leader", "score": 0.1512}]
+    assert "a dead zone ('ff none + dead zone on sw_leader', sum of NRMSE^2 0.1512 against 0.1355)" in eff["detail"]
+    assert "not identifiable from these runs" in eff["detail"]
+    # no rival within 'about as well' on this drive: identifiable, the detail as before
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, far, rw], 0.397)
+    assert eff["kind_identifiable"] is True and "kind_rivals" not in eff
+    assert eff["detail"].endswith(")") and "identifiable" not in eff["detail"]
+    # a chosen dead zone names a shaft that fits about as well the same way
+    sh = dict(chosen, score=0.1500)
+    eff = structure._drive_effect(dz, forms, [rigid, dz, sh], 0.397)
+    assert eff["kind"] == "backlash" and eff["kind_rivals"][0]["kind"] == "compliance"
+    assert "a compliant shaft (" in eff["detail"]
