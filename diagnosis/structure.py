@@ -254,20 +254,20 @@ def kind_rivals(el, kind, as_well, drive_forms):
     (independent seed-47 c12: a true 2.8 deg leader dead zone, the leader shaft at 4.45 Hz
     claimed, 0.136, the 1 deg dead zone 0.151, about as well)."""
     out = {}
-    for r in as_well:
-        e, k, _ = drive_forms.get(r.get("form"), (None, None, None))
-        if e == el and k not in (None, kind) and (k not in out or r["score"] < out[k]["score"]):
-            out[k] = {"kind": k, "form": r["name"], "score": float(r["score"])}
-    return sorted(out.values(), key=lambda x: x["score"])
+    for r in sorted(as_well, key=lambda r: r["score"]):
+        e, k, _ = drive_forms[r["form"]]
+        if e == el and k != kind:
+            out.setdefault(k, {"kind": k, "form": r["name"], "score": float(r["score"])})
+    return list(out.values())
 
 
-def kind_rivals_text(el, kind, rivals, score=None):
+def kind_rivals_text(el, kind, rivals, score):
     """What the detail says when a drive form of another kind on ``el`` fits about as well
     (``score``: the chosen form's sum of NRMSE^2)."""
     if not rivals:
         return ""
-    alt = " or ".join(f"{KIND_NAMES.get(x['kind'], x['kind'])} ('{x['form']}', sum of NRMSE^2 {x['score']:.4g}"
-                      + (f" against {score:.4g}" if score is not None else "") + ")" for x in rivals)
+    alt = " or ".join(f"{KIND_NAMES.get(x['kind'], x['kind'])} ('{x['form']}', sum of NRMSE^2 {x['score']:.4g} "
+                      f"against {score:.4g})" for x in rivals)
     return (f"; {alt} fits about as well: whether {el}'s drive has {KIND_NAMES.get(kind, kind)} or "
             f"{' or '.join(KIND_NAMES.get(x['kind'], x['kind']) for x in rivals)} is not identifiable from these runs")
 
