@@ -232,13 +232,28 @@ def load_located(path, overrides=None, _seen=()):
             apply_override(data, key, value, sets.key_locs.get(key, set_loc))
     for key, value in (overrides or {}).items():
         loc = Location(str(path), 0, f"--set {key}={value}")
-        if isinstance(value, str):
-            try:
-                value = yaml.safe_load(value) if value.strip() else value
-            except yaml.YAMLError:
-                pass  # keep the string; validation names it
+        if isinstance(value, str) and value.strip():
+            value = _override_value(value)
         apply_override(data, key, with_location(value, loc), loc)
     return data
+
+
+_OVERRIDES_READ = {}   # override string -> its YAML value
+
+
+def _override_value(text):
+    """An override's string read as YAML (the string itself if it does not read; validation
+    names it). Memoised: a diagnosis loads every variant under its runs' overrides, and
+    reading them again was a tenth of its layout loading. The value is shared:
+    :func:`with_location` gives every load containers of its own."""
+    if text not in _OVERRIDES_READ:
+        if len(_OVERRIDES_READ) > 4096:
+            _OVERRIDES_READ.clear()
+        try:
+            _OVERRIDES_READ[text] = yaml.safe_load(text)
+        except yaml.YAMLError:
+            _OVERRIDES_READ[text] = text
+    return _OVERRIDES_READ[text]
 
 
 # ---- dotted keys ----------------------------------------------------------------------------

@@ -215,3 +215,22 @@ def test_a_family_fitted_beside_a_near_line_takes_only_its_own_share():
     assert abs(Y_alone - Y_true) > 0.01                       # the leak is real at this length
     assert abs(Y_joint - Y_true) < 1e-9 * 3.0                   # exact but for rounding
     assert est.fit_harmonics_joint(y, [(th_a, [1])])[0] == Y_alone
+
+
+def test_least_squares_by_normal_equations_matches_the_svd_and_falls_back_when_ill_conditioned():
+    """The normal equations solve a near-orthogonal harmonic basis to rounding (error about
+    cond x eps of the scaled Gram matrix, here < 10); two lines 1/2500 of 1/T apart make the
+    Gram matrix near singular, and the SVD (``lstsq``) solves it instead (Gram None)."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0.0, 20.0, 1 / FS)
+    A = np.hstack([est.harmonic_basis(_angle(t, 1.3), [1, 2, 3]), est.harmonic_basis(_angle(t, 2.9), [1, 2])])
+    y = A @ rng.normal(size=A.shape[1]) + rng.normal(0, 0.5, len(t))
+    coef, G = est.least_squares(A, y)
+    ref = np.linalg.lstsq(A, y, rcond=None)[0]
+    assert G is not None
+    assert np.max(np.abs(coef - ref)) < 1e-10 * np.max(np.abs(ref))
+    near = np.hstack([est.harmonic_basis(2 * math.pi * 1.0 * t, [1]),
+                      est.harmonic_basis(2 * math.pi * (1.0 + 2e-5) * t, [1])])   # 1/T = 0.05 Hz
+    coef, G = est.least_squares(near, y)
+    assert G is None
+    assert np.allclose(coef, np.linalg.lstsq(near, y, rcond=None)[0])
