@@ -54,7 +54,8 @@ def _ctx(name, fit, overrides=None):
 def _diagnosis(ctx, corrections):
     d = Diagnosis.__new__(Diagnosis)
     d.ctx, d.notes, d.model = ctx, [], _Model()
-    d.run_corrections = {n: {KEY: f"{R:.6g} m", "kappa": {"rewind": R_LAYOUT / R - 1.0}} for n, R in corrections.items()}
+    d.run_corrections = {n: {KEY: f"{R:.6g} m", "kappa": {"rewind": R_LAYOUT / R - 1.0}}
+                         for n, R in corrections.items()}
     return d
 
 
