@@ -571,3 +571,42 @@ def test_a_refused_shaft_is_shown_on_the_held_out_runs_beside_its_refusal():
     assert h == {"failed": "run run2 (refused): diverged at t = 3 s"}
     rec["refused"]["holdout"] = h
     assert "held-out runs failed (run run2 (refused): diverged at t = 3 s)" in compliance.refused([rec])[0]["text"]
+
+
+def test_a_claimed_shafts_mode_range_is_followed_past_the_grid_while_the_shafts_still_pass(monkeypatch):
+    """The range a claimed shaft's mode comes with ends where the shafts stop passing the
+    spectral rule, not where the scan's grid stops (independent seed-52 c09: the unwind's
+    4.65 Hz mode claimed at 2.75 Hz, the range 1.92-3.44 Hz the grid's ends). Stand-ins:
+    the misfit is flat to 4.5 Hz and rises past it; no simulation."""
+    from types import SimpleNamespace
+    hump = {"run": "run1", "frequency_hz": 2.75}
+    c = SimpleNamespace(fs=500.0)
+    probed = []
+
+    def fit(d, noise, doc, sims, hump_):
+        ft = doc["ft"]
+        probed.append(ft)
+        return (0.03 if ft <= 4.5 else 0.5), 0.9, {}, {"unwind": 0.9}
+
+    monkeypatch.setattr(compliance, "spectral_fit", fit)
+    monkeypatch.setattr(compliance.others, "_drive_doc", lambda doc, spec, ft, bl, zeta=0.05: {"ft": ft})
+    d = SimpleNamespace(_simulate_all=lambda doc, label, ctxs=None: {})
+    base = (0.3, 0.2, {})
+    b = {"element": "unwind", "doc": {}, "spec": ("unwind",), "zeta": 0.1}
+
+    def pt(ft, misfit):
+        return {"torsional_hz": ft, "misfit": misfit, "explained": 0.9, "own_share": 0.9}
+
+    pts = [pt(r * 2.75, 0.03) for r in compliance.SCAN]          # every grid point passes
+    got = compliance.range_beyond_grid(d, None, hump, c, b, base, pts)
+    up = compliance.SCAN[-1] / compliance.SCAN[-2]
+    top = [f for f in got if f > 2.75]
+    assert max(top) <= 4.5 < max(top) * up                        # followed to the last passing step
+    assert len([f for f in probed if f > 4.5]) == 1               # ... and stopped at the first that fails
+    low = [f for f in got if f < 2.75]
+    assert min(low) >= compliance.band_of(hump, c.fs)[0]          # never past the band the fit compares
+    # a grid end whose shaft already failed bounds the range inside the grid: nothing probed that way
+    probed.clear()
+    pts = [pt(r * 2.75, 0.03 if r < compliance.SCAN[-1] else 0.5) for r in compliance.SCAN]
+    got = compliance.range_beyond_grid(d, None, hump, c, b, base, pts)
+    assert all(f < 2.75 for f in got) and all(f < 2.75 for f in probed)
