@@ -414,6 +414,26 @@ def _elsewhere(d, noise, hump, b, bands, c):
     return float(np.median(ms)) if ms else None
 
 
+def shaft_point(d, noise, hump, c, doc0, spec, ft, zeta, form=None, sets=None, label=""):
+    """A shaft on ``spec``'s drive with its torsional mode at ``ft`` Hz and damping ratio
+    ``zeta`` in the layout ``doc0``, simulated on the hump's run ``c`` and fitted to its
+    spectrum (:func:`spectral_fit`): the scan's point {element, torsional_hz, zeta, misfit,
+    explained, levels, own_share, spec, doc, form, sets}, or None where the engine cannot
+    run it or the fit fails (no candidate). ``label``: what the log adds to the shaft's name."""
+    doc = others._drive_doc(copy.deepcopy(doc0), spec, ft, 0.0, zeta=zeta)
+    try:
+        sims = d._simulate_all(doc, f"shaft {spec[0]} {ft:.3g} Hz{label}", ctxs=[c])
+    except Exception as exc:  # noqa: BLE001 - a shaft the engine cannot run is no candidate
+        log.info("  shaft of %s at %.3g Hz failed: %s", spec[0], ft, (str(exc).splitlines() or [""])[0][:200])
+        return None
+    got = spectral_fit(d, noise, doc, sims, hump)
+    if got is None:
+        return None
+    return {"element": spec[0], "torsional_hz": ft, "zeta": zeta, "misfit": got[0],
+            "explained": got[1], "levels": got[2], "own_share": got[3].get(spec[0], 0.0),
+            "spec": spec, "doc": doc, "form": form, "sets": sets}
+
+
 def _scan(d, noise, hump, c, specs, doc0=None, form=None, sets=None):
     """Each element's best shaft for ``hump`` on the grid :data:`SCAN` x the hump's
     frequency (damping :data:`ZETA`), then the best element's damping and a half
@@ -425,20 +445,11 @@ def _scan(d, noise, hump, c, specs, doc0=None, form=None, sets=None):
     tag = f", form {form}" if form else ""
 
     def shaft(spec, ft, zeta, best):
-        doc = others._drive_doc(copy.deepcopy(doc0), spec, ft, 0.0, zeta=zeta)
-        try:
-            sims = d._simulate_all(doc, f"shaft {spec[0]} {ft:.3g} Hz{tag}", ctxs=[c])
-        except Exception as exc:  # a shaft the engine cannot run is no candidate
-            log.info("  shaft of %s at %.3g Hz failed: %s", spec[0], ft, (str(exc).splitlines() or [""])[0][:200])
+        pt = shaft_point(d, noise, hump, c, doc0, spec, ft, zeta, form, sets, tag)
+        if pt is None:
             return best
-        got = spectral_fit(d, noise, doc, sims, hump)
-        if got is None:
-            return best
-        pt = {"element": spec[0], "torsional_hz": ft, "zeta": zeta, "misfit": got[0],
-              "explained": got[1], "levels": got[2], "own_share": got[3].get(spec[0], 0.0),
-              "spec": spec, "doc": doc, "form": form, "sets": sets}
         points.setdefault(spec[0], []).append(pt)
-        return pt if best is None or got[0] < best["misfit"] else best
+        return pt if best is None or pt["misfit"] < best["misfit"] else best
 
     points = {}
 
@@ -505,16 +516,9 @@ def range_beyond_grid(d, noise, hump, c, b, base, pts):
             ft *= q
             if not lo <= ft <= hi:
                 break
-            doc = others._drive_doc(copy.deepcopy(b["doc"]), b["spec"], ft, 0.0, zeta=b["zeta"])
-            try:
-                sims = d._simulate_all(doc, f"shaft {b['element']} {ft:.3g} Hz, its range", ctxs=[c])
-            except Exception as exc:  # noqa: BLE001 - a mode the engine cannot run ends the range
-                log.info("  shaft of %s at %.3g Hz failed: %s", b["element"], ft, (str(exc).splitlines() or [""])[0])
-                break
-            got = spectral_fit(d, noise, doc, sims, hump)
-            if got is None or not passes_spectral_rule(
-                    {"misfit": got[0], "explained": got[1], "own_share": got[3].get(b["element"], 0.0)}, base):
-                break
+            pt = shaft_point(d, noise, hump, c, b["doc"], b["spec"], ft, b["zeta"], label=", its range")
+            if pt is None or not passes_spectral_rule(pt, base):
+                break   # a mode the engine cannot run, or one that fits worse, ends the range
             out.append(ft)
     return out
 
