@@ -822,8 +822,7 @@ class Diagnosis:
                 for idx in (pieces or [idx_all]):
                     A = np.hstack([est.harmonic_basis(th[idx], o) for th, o in families])
                     if len(idx) > A.shape[1] + 2:
-                        coef, *_ = np.linalg.lstsq(A, y[idx], rcond=None)
-                        y[idx] -= A @ coef
+                        y[idx] -= A @ est.least_squares(A, y[idx])[0]
             out[s] = y
         return out
 
@@ -873,15 +872,11 @@ class Diagnosis:
                 R = c.radius0.get(k.component, 0.0)
                 if R <= 0:
                     continue
-                key = f"experiment.roll_radius.{k.element}"
-                Rt = R / (1.0 + kap)
-                ov[key] = f"{Rt:.9g} m"
-                self.run_corrections.setdefault(c.name, {})[key] = f"{Rt:.6g} m"
-                self.run_corrections[c.name].setdefault("kappa", {})[k.element] = kap
-                self.run_corrections[c.name].setdefault("radius_in_run_m", {})[k.element] = R
-                self.run_corrections[c.name].setdefault(
-                    "from", ("fit run" if c.fit else "held-out run: its own data on the roll's lines only")
+                key, Rt = self._correct_radius(
+                    c, k, R, R / (1.0 + kap),
+                    ("fit run" if c.fit else "held-out run: its own data on the roll's lines only")
                     if c.theta_src.get(k.key) == "model" else f"the run's {c.theta_src.get(k.key)} of {k.element}")
+                ov[key] = f"{Rt:.9g} m"
             if ov != c.run.overrides:
                 c.run = dataclasses.replace(c.run, overrides=ov)
                 changed.append(c)
@@ -904,9 +899,7 @@ class Diagnosis:
                         continue
                     from_model = c.theta_src[k.key] == "model"
                     if from_model:   # a data angle stays the run's angle
-                        c.theta[k.key] = sim.columns[k.theta]
-                        c.freq[k.key] = self._mean_freq(c, c.theta[k.key])
-                        c.kappa[k.key] = 0.0
+                        self._angle_from(c, k, sim)
                     if it == 3:
                         continue
                     dk = (self._refine_kappa_joint([c], k, span=0.25 * self.opt.kappa_span, strict=False)
@@ -955,12 +948,8 @@ class Diagnosis:
                 R = c.radius0.get(k.component, 0.0)
                 if key in self.run_corrections.get(c.name, {}) or R <= 0 or c.theta_src.get(k.key) != "model":
                     continue
-                corr = self.run_corrections.setdefault(c.name, {})
-                corr[key] = f"{R_fit:.6g} m"
-                corr.setdefault("kappa", {})[k.element] = R / R_fit - 1.0
-                corr.setdefault("radius_in_run_m", {})[k.element] = R
-                corr.setdefault("from", f"the fit runs ({', '.join(sorted(found))}): no run sets {k.element}'s "
-                                        f"radius, so every run starts at the layout's")
+                self._correct_radius(c, k, R, R_fit, f"the fit runs ({', '.join(sorted(found))}): no run sets "
+                                                     f"{k.element}'s radius, so every run starts at the layout's")
                 c.run = dataclasses.replace(c.run, overrides={**c.run.overrides, key: f"{R_fit:.9g} m"})
                 todo.append(c)
             if not todo:
@@ -975,9 +964,26 @@ class Diagnosis:
                 if isinstance(sim, Exception):
                     raise SimulationFailed(f"run {c.name} (nominal, the fit runs' radius): {sim}")
                 if k.theta in sim.columns:
-                    c.theta[k.key] = sim.columns[k.theta]
-                    c.freq[k.key] = self._mean_freq(c, c.theta[k.key])
-                    c.kappa[k.key] = 0.0
+                    self._angle_from(c, k, sim)
+
+    def _correct_radius(self, c, k, R, Rt, origin):
+        """Record run ``c``'s start radius of roll ``k`` as ``Rt`` (m) for the written ``R``
+        in ``run_corrections`` (its kappa = R/Rt - 1, where it came from); returns the
+        run override's key and ``Rt``."""
+        key = f"experiment.roll_radius.{k.element}"
+        corr = self.run_corrections.setdefault(c.name, {})
+        corr[key] = f"{Rt:.6g} m"
+        corr.setdefault("kappa", {})[k.element] = R / Rt - 1.0
+        corr.setdefault("radius_in_run_m", {})[k.element] = R
+        corr.setdefault("from", origin)
+        return key, Rt
+
+    def _angle_from(self, c, k, sim):
+        """Roll ``k``'s angle in run ``c`` taken from the nominal simulation ``sim`` under
+        the corrected run conditions (no speed scale left to apply)."""
+        c.theta[k.key] = sim.columns[k.theta]
+        c.freq[k.key] = self._mean_freq(c, c.theta[k.key])
+        c.kappa[k.key] = 0.0
 
     def _refine_kappa_joint(self, fit, k, span=None, strict=True, extend=False, signals=None):
         """One speed scale of family k over all fit runs (a radius is the same in
