@@ -156,6 +156,29 @@ def test_an_order_the_forms_disagree_on_is_flagged_not_identifiable():
     assert "identifiable_basis" not in h4      # already flagged by its own rule
 
 
+def test_fit_runs_that_disagree_beyond_20_percent_and_their_noise_flag_the_dominant_amplitude():
+    """Independent seed-53 c08: the unwind's order 2, 84 and 120 um in the two fit runs
+    (standard errors about 2 um), 109 um reported for 157 true. A run-out is the same at
+    every speed, so the runs say the model's response is off by 1.43 x between them: the
+    dominant order is flagged as not known to 20 %, the other orders are left alone. Runs
+    1.1 x apart, or 1.43 x apart within 3 standard errors, are not flagged."""
+    from webline.diagnosis import report
+    from webline.diagnosis.structure import runs_apart
+
+    assert runs_apart({"run1": (84e-6, 2e-6), "run3": (120e-6, 2e-6)}) == (pytest.approx(120 / 84), True)
+    assert runs_apart({"run1": (84e-6, 9e-6), "run3": (120e-6, 9e-6)})[1] is False   # 36 < 3 x 12.7 um
+    assert runs_apart({"run1": (100e-6, 1e-7), "run3": (110e-6, 1e-7)})[1] is False  # within 20 %
+    assert runs_apart({"run1": (100e-6, 1e-7)}) == (1.0, False)
+    eff = {"harmonics": [{"order": 1, "amplitude": 3.1e-5, "identifiable": True},
+                         {"order": 2, "amplitude": 1.09e-4, "identifiable": True}],
+           "amplitude_uncertainty": {"dominant_order": 2, "within_precision": False, "note": "runs apart",
+                                     "range_by_order": [[3e-5, 3.2e-5], [1.08e-4, 1.12e-4]]}}
+    report._forms_flag(eff)
+    h1, h2 = eff["harmonics"]
+    assert h2["within_precision"] is False and h2["precision_basis"] == "runs apart"
+    assert h2["identifiable"] is True and "within_precision" not in h1
+
+
 def test_coherence_debiased_reads_a_weak_steady_line_as_steady_and_noise_or_a_transient_as_not():
     """Segment SNR 1 at K = 4: the raw ratio reads about (K r + 1)/(K r + K) = 0.625
     (0.60 as a mean of single draws), below the screen's 0.75 for a perfectly steady

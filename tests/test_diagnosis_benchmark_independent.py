@@ -293,6 +293,11 @@ def test_target_scores_on_hand_made_reports():
     s2 = BI.target_scores([c1])
     assert s2["amplitude"]["ok"] == 0 and s2["verdict"]["amplitude"] == "fail"
     assert s2["verdict"]["precision"] == "pass" and s2["verdict"]["no_worse_nrmse"] == "pass"
+    # ... unless the report flags it as not known to 20 % (the fit runs' own estimates disagree)
+    c1["report"]["effects"][0]["harmonics"][0]["within_precision"] = False
+    s3 = BI.target_scores([c1])
+    assert s3["amplitude"]["ok"] == 1 and s3["amplitude"]["flagged"] == 1
+    del c1["report"]["effects"][0]["harmonics"][0]["within_precision"]
     md = BI.side_by_side({"own": s2, "independent": s})
     assert md.count("\n") == 12 and "| own | independent |" in md  # 2 header lines, 10 measures
 
