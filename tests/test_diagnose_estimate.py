@@ -257,3 +257,42 @@ def test_least_squares_by_normal_equations_matches_the_svd_and_falls_back_when_i
     coef, G = est.least_squares(near, y)
     assert G is None
     assert np.allclose(coef, np.linalg.lstsq(near, y, rcond=None)[0])
+
+
+def test_a_line_searched_shafts_range_is_where_its_residual_is_within_a_tenth_of_the_best():
+    """others.as_well_range: residual energy J(f) = 20 + 320 (f - 13.47)^2 near the mode.
+    The best point tried, 13.5 Hz, leaves 20.288; 10 % more (22.317) is left where
+    320 (f - 13.47)^2 = 2.317, f = 13.47 +- 0.0851 Hz. Points on a parabola give it
+    exactly; the best at an end of the points, or a concave triple, give no range."""
+    from webline.diagnosis.others import as_well_range
+
+    def J(f):
+        return 20.0 + 320.0 * (f - 13.47) ** 2
+    lo, hi = as_well_range([(f, J(f)) for f in (10.8, 13.2, 13.5, 13.9)])
+    half = math.sqrt((1.1 * J(13.5) - 20.0) / 320.0)
+    assert half == pytest.approx(0.0851, abs=1e-4)
+    assert (lo, hi) == (pytest.approx(13.47 - half, rel=1e-9), pytest.approx(13.47 + half, rel=1e-9))
+    assert as_well_range([(13.0, J(13.0)), (13.2, J(13.2)), (13.4, J(13.4))]) is None
+    assert as_well_range([(1.0, 5.0), (2.0, 1.0), (3.0, 5.0), (4.0, 0.5)]) is None
+
+
+def test_a_line_searched_shafts_range_is_narrowed_by_bisection_to_a_sharp_resonances_well():
+    """others._bisect_range on a resonance's well, J(f) = 100 (1 - 0.98 / (1 + ((f - 13.47)
+    / 0.1)^2)), tried at 13.46, 10.77 and 16.15 Hz as own seed-0 c09's line search was:
+    the parabola through them is far wider than the well. 10 % more than the best's
+    residual (2.970) is left where 0.98 / (1 + u^2) = 1 - 1.1 x 0.0297, u = 0.114
+    (f = 13.47 +- 0.0114 Hz). Three simulations a side (the parabola's end, then halves)
+    keep the outer end of the bracket: never inside the crossing, narrower than the parabola."""
+    from webline.diagnosis.others import _bisect_range, as_well_range
+
+    def J(f):
+        return 100.0 * (1.0 - 0.98 / (1.0 + ((f - 13.47) / 0.1) ** 2))
+    pts = [(f, J(f)) for f in (13.46, 10.77, 16.15)]
+    span = as_well_range(pts)
+    calls = []
+    lo, hi = _bisect_range(pts, span, lambda v: calls.append(v) or J(v))
+    assert len(calls) == 6 and calls[0] == span[0] and calls[3] == span[1]
+    u = 0.1 * math.sqrt(0.98 / (1.0 - 1.1 * J(13.46) / 100.0) - 1.0)
+    assert u == pytest.approx(0.0114, abs=1e-4)
+    assert 10.77 <= lo <= 13.47 - u and 13.47 + u <= hi <= 16.15
+    assert span[0] <= lo and hi <= span[1] and hi - lo < span[1] - span[0]
