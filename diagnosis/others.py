@@ -539,10 +539,9 @@ def _bisect_range(pts, span, energy):
     each side, between the best value and the nearest evaluated one that fits worse than
     the threshold (or the parabola's end), :data:`RANGE_BISECTIONS` simulations (the
     parabola's end first, then halves) keep the outer end of the bracket the threshold
-    crossing lies in. A sharp resonance is not a
-    parabola over a 20 % bracket: own seed-0 c09's leader shaft, 13.46 Hz best, 10.77 and
-    16.15 Hz tried (residual energies 148, 1267, 1298), the parabola through them is wider
-    than the well."""
+    crossing lies in. A resonance's well is not a parabola over a 20 % bracket: own
+    seed-0 c09's leader shaft, 13.46 Hz best, 10.77 and 16.15 Hz tried (residual energies
+    148, 1267, 1298)."""
     from webline.diagnosis.structure import AS_WELL
     best_v, best_J = min(pts, key=lambda p: p[1])
     thr = (1.0 + AS_WELL) * best_J

@@ -565,11 +565,12 @@ def _second_source_text(rep, ef, big, s):
     """The other reading of a held-out line the found source barely reaches: another
     element turning at its frequency (a candidate outside the effect's tie) acting on
     ``s``, named when the held-out and the fit runs kept that order's line there within
-    1 - :data:`SECOND_SOURCE_LEFT` of whole (the found source barely reaches ``s``; more is
-    the found source adding a line, not a second one) and it stood out of the noise
-    (:data:`SECOND_SOURCE_LOG10_P`) short of what a second source at one frequency must pass (independent seed-53 c05: roller9 and roller19 both
-    eccentric at 4.22 Hz, one fit run; roller19 found, lc9's order 1 left whole in the fit
-    run at z 8.0, p 3e-4, below the p 1e-5 asked, and 100 % of it in the held-out run).
+    1 - :data:`SECOND_SOURCE_LEFT` of whole (the found source barely reaches ``s``; more
+    is the found source adding a line, not a second one) and it stood out of the noise
+    (:data:`SECOND_SOURCE_LOG10_P`) short of what a second source at one frequency must
+    pass (independent seed-53 c05: roller9 and roller19 both eccentric at 4.22 Hz, one
+    fit run; roller19 found, lc9's order 1 left whole in the fit run at z 8.0, p 3e-4,
+    below the p 1e-5 asked, and 100 % of it in the held-out run).
     '' otherwise. The held-out data only say where to look: nothing is fitted on them."""
     eff = next((e for e in rep.get("effects") or [] if e.get("element") == ef["element"]
                 and e.get("kind") == ef["kind"]), None)

@@ -83,10 +83,10 @@ def runs_apart(runs):
     order disagree by more than :data:`AMPLITUDE_PRECISION` (max/min) and more than
     :data:`RUNS_APART_SIGMAS` standard errors: a run-out is the same at every speed, so
     such runs say the model's response to it is off by that much in one run at least,
-    and the joint amplitude is not known to that precision (independent seed-53 c08:
-    the unwind's order 2 84 and 120 um in the two fit runs, 109 um reported for 157;
-    c10: the S-wrap leader's order 1 271 and 351 um, 316 um for 252). Returns
-    (ratio, apart)."""
+    and the joint amplitude is not known to that precision (independent seed-51 c02:
+    the unwind's order 5, 133 and 105 um in the two fit runs, 125 um reported, 15 % off).
+    Runs apart within their noise say nothing: seed-53 c08's unwind, 84 +- 37 and
+    120 +- 8 um (109 um reported for 157). Returns (ratio, apart)."""
     xs = sorted((x, sg) for x, sg in runs.values() if x > 0)
     if len(xs) < 2:
         return 1.0, False
