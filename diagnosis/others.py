@@ -456,11 +456,10 @@ def _line_search(b, sims, energies, doc0, iterations=5):
     for _ in range(iterations):
         if v is None or (pts and min(abs(v - p[0]) for p in pts) < 0.01 * max(abs(v), 1e-6)):
             break
-        sb = sims(L["edit"](copy.deepcopy(doc0), v), f"refine {b['element']} = {v:.4g}")
-        if sb is None:
+        J = _energy_at(L, sims, energies, doc0, v, f"refine {b['element']} = {v:.4g}")
+        if J is None:
             break
-        rd, dd, rr = energies(sb)
-        pts.append((v, rr - 2 * rd + dd))
+        pts.append((v, J))
         ys = [p[1] for p in pts]
         if len(pts) >= 2 and max(ys) - min(ys) < 1e-3 * max(ys):
             break  # the residual does not depend on this value: keep the screened one
@@ -479,7 +478,8 @@ def _line_search(b, sims, energies, doc0, iterations=5):
             b["detail"] = f"{b['element']} compliance, torsional mode {best_v:.3g} Hz"
             span = as_well_range(pts)
             if span is not None:
-                span = _bisect_range(pts, span, lambda v: _energy_at(L, sims, energies, doc0, v, b))
+                span = _bisect_range(pts, span, lambda v: _energy_at(L, sims, energies, doc0, v,
+                                                                     f"range {b['element']} = {v:.4g}"))
                 b["parameters"]["torsional_frequency"]["range"] = span
                 b["detail"] += f"; {span[0]:.4g}-{span[1]:.4g} Hz fit about as well"
         else:
@@ -525,9 +525,10 @@ def as_well_range(pts):
 RANGE_BISECTIONS = 3   # simulations per side that narrow a line-searched shaft's range to its bracket / 8
 
 
-def _energy_at(L, sims, energies, doc0, v, b):
-    """Residual energy with candidate ``b`` at value ``v`` (None if it cannot be simulated)."""
-    sb = sims(L["edit"](copy.deepcopy(doc0), v), f"range {b['element']} = {v:.4g}")
+def _energy_at(L, sims, energies, doc0, v, label):
+    """Residual energy with the line-searched candidate (``L``, its line) at value ``v``
+    (None if it cannot be simulated)."""
+    sb = sims(L["edit"](copy.deepcopy(doc0), v), label)
     if sb is None:
         return None
     rd, dd, rr = energies(sb)

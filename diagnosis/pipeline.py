@@ -872,8 +872,9 @@ class Diagnosis:
                 R = c.radius0.get(k.component, 0.0)
                 if R <= 0:
                     continue
-                key, Rt = self._correct_radius(
-                    c, k, R, R / (1.0 + kap),
+                Rt = R / (1.0 + kap)
+                key = self._correct_radius(
+                    c, k, R, Rt,
                     ("fit run" if c.fit else "held-out run: its own data on the roll's lines only")
                     if c.theta_src.get(k.key) == "model" else f"the run's {c.theta_src.get(k.key)} of {k.element}")
                 ov[key] = f"{Rt:.9g} m"
@@ -969,14 +970,14 @@ class Diagnosis:
     def _correct_radius(self, c, k, R, Rt, origin):
         """Record run ``c``'s start radius of roll ``k`` as ``Rt`` (m) for the written ``R``
         in ``run_corrections`` (its kappa = R/Rt - 1, where it came from); returns the
-        run override's key and ``Rt``."""
+        run override's key."""
         key = f"experiment.roll_radius.{k.element}"
         corr = self.run_corrections.setdefault(c.name, {})
         corr[key] = f"{Rt:.6g} m"
         corr.setdefault("kappa", {})[k.element] = R / Rt - 1.0
         corr.setdefault("radius_in_run_m", {})[k.element] = R
         corr.setdefault("from", origin)
-        return key, Rt
+        return key
 
     def _angle_from(self, c, k, sim):
         """Roll ``k``'s angle in run ``c`` taken from the nominal simulation ``sim`` under
