@@ -144,12 +144,8 @@ class LineModel:
         from webline.diagnosis import layout_edit
         if path is not None:
             doc = layout_edit.relative_to(doc, Path(path).parent)
-        # a variant's file is only read back (libyaml's emitter: a fifth of the time of the
-        # pure-Python one, which dumped every variant to key it); the user's file keeps the
-        # pure emitter's layout of the text
-        dumper = yaml.SafeDumper if path is not None else getattr(yaml, "CSafeDumper", yaml.SafeDumper)
         text = ("# written by webline diagnose: the layout named in 'base' plus what the diagnosis added\n"
-                + yaml.dump(doc, Dumper=dumper, sort_keys=False, allow_unicode=True))
+                + yaml.safe_dump(doc, sort_keys=False, allow_unicode=True))
         if path is None:
             # one file per distinct document: a variant is simulated once per run, and an
             # unchanged file is parsed once (orchestrator.layout_source's cache)
