@@ -113,35 +113,25 @@ def load_yaml(path, text=None):
     return _load_yaml_text(path, text)
 
 
-# libyaml's parser where PyYAML was built with it: the same nodes and marks at a
-# fraction of the pure-Python parser's time (a diagnosis parses each of its ~500-2500
-# layout variants once; 12 ms each was 4 % of a case's wall time)
-_FAST_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-
-
-def _load_yaml_text(path, text, loader_cls=None):
+def _load_yaml_text(path, text):
     if text is None:
         try:
             text = path.read_text()
         except OSError as exc:
             raise LayoutError(Issue(Location(str(path)), "", f"cannot read the layout: {exc.strerror or exc}")) from None
-    loader = (loader_cls or _FAST_LOADER)(text)
+    loader = yaml.SafeLoader(text)
     try:
         node = loader.get_single_node()
         if node is None:
             raise LayoutError(Issue(Location(str(path), 1), "", "the file is empty; a layout is a YAML mapping"))
         return _build(loader, node, path)
-    except yaml.YAMLError as exc:
-        if loader_cls is None and _FAST_LOADER is not yaml.SafeLoader:
-            # a file that does not parse is read again by the pure-Python parser, whose
-            # messages say what and where in the words the user reads everywhere else
-            return _load_yaml_text(path, text, yaml.SafeLoader)
-        if not isinstance(exc, yaml.MarkedYAMLError):
-            raise LayoutError(Issue(Location(str(path)), "", f"YAML: {exc}")) from None
+    except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else 0
         reason = " ".join(str(x) for x in (exc.context, exc.problem) if x)
         raise LayoutError(Issue(Location(str(path), line), "", f"YAML syntax: {reason}")) from None
+    except yaml.YAMLError as exc:
+        raise LayoutError(Issue(Location(str(path)), "", f"YAML: {exc}")) from None
     finally:
         loader.dispose()
 
