@@ -580,9 +580,10 @@ def screen(d):
                 f"{' and '.join(els)} turn at one frequency and the fit runs give as many lines per order as "
                 f"they have unknowns (orders {', '.join(map(str, exact))}): together they fit those lines "
                 f"exactly whatever the line's response, so the data do not test that they are "
-                f"{len(els)} sources rather than one whose line the model passes on wrongly; their split "
-                f"and their held-out prediction rest on the model's response alone. A fit run at another "
-                f"line speed would test it")
+                f"{len(els)} sources rather than one whose line the model passes on wrongly; their split, "
+                f"their amplitudes at those orders (not known to {100 * structure.AMPLITUDE_PRECISION:.0f} %, "
+                f"marked ~) and their held-out prediction rest on the model's response alone. A fit run at "
+                f"another line speed would test it")
     for fe in d.final_effects:
         b = fe["ranked"][0]
         b["lines_range"] = rg = ranges.get(b["cand"].element) or {}

@@ -298,6 +298,8 @@ def test_a_line_answers_for_what_its_layout_holds_and_a_line_without_the_effect_
     got = transfer.joint_amplitude_ranges(_resp(FIT, g1 + g2), GJ, members, [FIT], Xs=[[X, X2], [X, X0]])
     assert got["roller9"][1]["by_line"] == pytest.approx([3e-4], rel=1e-9)
     assert got["roller19"][1]["by_line"] == pytest.approx([1.5e-4], rel=1e-9)
+    # one run's two load cells, two sources: as many unknowns as lines
+    assert got["roller9"][1]["exact"] and got["roller19"][1]["shared_with"] == ["roller9"]
 
 
 def test_a_range_wider_than_a_factor_2_is_not_identifiable():
@@ -310,6 +312,21 @@ def test_a_range_wider_than_a_factor_2_is_not_identifiable():
     h1, h2 = report._harmonic_entry(b, X, 0), report._harmonic_entry(b, X, 1)
     assert h1["identifiable"] is True and h1["range_over_lines"] == [0.8e-4, 1.3e-4]
     assert h2["identifiable"] is False and "factor 2" in h2["identifiable_basis"]
+
+
+def test_an_exact_split_is_not_known_to_the_precision_asked():
+    """report.py: two sources at one frequency fitted exactly (as many unknowns as lines)
+    rest on the model's response alone: each such order is marked within_precision false,
+    whatever its range over lines says of identifiability (independent seed-54 c24)."""
+    from webline.diagnosis import report
+    X = np.array([5e-4, 2e-5], complex)
+    b = {"X_sigma": np.array([1e-6, 1e-6]),
+         "lines_range": {1: {"range": [4.3e-4, 7.5e-4], "shared_with": ["idler_u1"], "exact": True},
+                         2: {"range": [1.5e-5, 2.5e-5], "shared_with": ["idler_u1"], "exact": False}}}
+    h1, h2 = report._harmonic_entry(b, X, 0), report._harmonic_entry(b, X, 1)
+    assert h1["identifiable"] is True and h1["within_precision"] is False
+    assert "idler_u1" in h1["precision_basis"] and "exactly" in h1["precision_basis"]
+    assert "within_precision" not in h2
 
 
 def test_a_ramped_held_out_run_is_judged_window_by_window():
