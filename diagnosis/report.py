@@ -213,7 +213,7 @@ def _harmonic_entry(b, X, j):
             # sources at one frequency with as many unknowns as the fit runs give lines: any
             # response splits the lines exactly, so nothing in the data checks the split (first
             # looks of seeds 2-54: 10 of 28 such unflagged amplitudes were more than 20 % off,
-            # against 32 of 630 of the other single sources; independent seed-54 c24: idler_r1's
+            # against 32 of 250 other single-run sources; independent seed-54 c24: idler_r1's
             # order 1, 509 um for 820, its range over lines 433-752 um)
             out["within_precision"] = False
             out["precision_basis"] = (f"split with {', '.join(lr.get('shared_with') or [])} at one frequency "
