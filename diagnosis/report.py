@@ -746,8 +746,9 @@ def html_report(d, rep):
     else:
         parts.append("<table><tr><th>#</th><th>element</th><th>kind</th><th>candidates (best first)</th>"
                      "<th>f (Hz)</th><th>share</th><th>confidence</th><th>C<sub>j</sub> (&micro;m; in brackets: over lines "
-                     "within the data sheet's tolerances; ?: not identifiable; ~: the fit runs disagree beyond "
-                     f"{100 * AMPLITUDE_PRECISION:.0f} %)</th></tr>")
+                     "within the data sheet's tolerances; ?: not identifiable; ~: not known to "
+                     f"{100 * AMPLITUDE_PRECISION:.0f} %: the fit runs disagree, or two sources at one "
+                     "frequency split its lines exactly)</th></tr>")
         for i, ef in enumerate(rep["effects"], 1):
             # the tie (the sensors cannot tell these apart) in bold
             tie = set(ef.get("tie") or []) if len(ef.get("tie") or []) > 1 else set()
