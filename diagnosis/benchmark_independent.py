@@ -575,7 +575,8 @@ def _not_identifiable(eff, order):
     if (eff.get("amplitude_uncertainty") or {}).get("identifiable") is False:
         return True
     for h in eff.get("harmonics") or []:
-        # or flagged as not known to the 20 % asked (the fit runs' own estimates disagree)
+        # or flagged as not known to the 20 % asked (the fit runs' own estimates disagree, or two
+        # sources at one frequency split its lines exactly)
         if int(h.get("order", -1)) == order and (h.get("identifiable") is False or h.get("within_precision") is False):
             return True
     return False
