@@ -1,0 +1,224 @@
+"""Where the shaft screen's spectral fit would place a hidden shaft, in several model layouts.
+
+A probe of an independent-benchmark case that ``webline diagnose-bench`` kept
+(``--out DIR``: ``DIR/independent/cases/cNN`` with ``truth/``, ``blind/`` and
+``diagnosis/``). It fits the drives' ripple responses to the residual's spectrum
+as :func:`diagnosis.compliance.spectral_fit` does (both load cells, every drive's
+ripple level and a white and a 1/f floor per sensor free; misfit = mean squared
+log ratio of data to fit over a band), for the rigid line and for model-built
+shafts on ``ELEMENT`` at 0.6-1.6 x the truth's torsional mode, in:
+
+* ``refined``: the diagnosis's refined layout;
+* ``refined-truth-lines``: that, with the truth's run-outs for the reported ones;
+* ``truth-rigid``: the truth's layout with its shaft taken out (the drive's
+  inertia rigid);
+* ``truth-but-GROUP``: that, with one group of the truth's settings back at the
+  layout's values (E, forms, spans, frictions, inertias, the element's inertia,
+  run-outs).
+
+``--grid`` instead probes 36 lines around the refined layout (web EA x0.87/1/1.13,
+the element's inertia x0.75/1/1.25, load-cell filters of order 1 or 2, feed-forward
+none or reference) and prints, per band, the rigid line's best and each shaft's best
+over them.
+
+``--lines-out`` takes the reported sources' lines out of the residual first
+(every harmonic up to 40 Hz on each source's simulated angle, 5 s blocks), as
+:func:`diagnosis.compliance.line_free` does. The fifty-eighth session's numbers
+in docs/diagnose.md ("What limits a shaft's recall") came from this recipe::
+
+    webline diagnose-bench --family independent --seed 54 --only c24 --out out/seed54
+    .venv/bin/python bench/shaft_probe.py out/seed54/independent/cases/c24 sw_leader
+"""
+import argparse
+import copy
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from webline.diagnosis import estimate, layout_edit, others, ripple
+from webline.diagnosis import runs as R
+from webline.diagnosis.line_model import LineModel
+from webline.orchestrator import units
+
+BANDS = ((2.0, 8.0), (3.15, 12.6), (5.0, 20.0), (8.0, 32.0))
+RATIOS = (0.6, 0.7, 0.8, 0.9, 1.0, 1.12, 1.25, 1.4, 1.6)
+SENSORS = ("lc9.T", "lc19.T")
+PROBE_TORQUE = "0.05 N*m"
+GROUPS = {
+    "E": lambda k, el: k == "web.E",
+    "forms": lambda k, el: is_form(k),
+    "spans": lambda k, el: k.endswith(".span"),
+    "frictions": lambda k, el: k.endswith(".friction"),
+    "inertias": lambda k, el: (k.endswith("inertia") or k.endswith(".mass") or k.endswith("radius"))
+    and k != f"path.{el}.inertia",
+    "own-inertia": lambda k, el: k == f"path.{el}.inertia",
+    "run-outs": lambda k, el: "eccentricity" in k,
+}
+
+
+def is_form(key):
+    """A set key of the truth that changes the model's form, not a parameter."""
+    return (key.startswith("web.damping") or key.startswith("sensors.") or "feedforward" in key
+            or "current_lag" in key)
+
+
+def with_sets(doc, sets):
+    for k, v in sets.items():
+        doc = layout_edit.with_set(doc, k, v)
+    return doc
+
+
+def quantity(text):
+    return float(str(text).split()[0])
+
+
+class Probe:
+    """One case's run, its model and the spectral fit of a layout to its residual."""
+
+    def __init__(self, case, run_name, lines_from=()):
+        self.model = LineModel(str(case / "blind" / "line.yaml"))
+        self.run = R.load_run(str(case / "blind" / f"{run_name}.yaml"))
+        t = np.asarray(self.run.t)
+        self.fs = 1.0 / float(np.median(np.diff(t)))
+        self.i0 = len(t) // 6            # the start's transient left out
+        self.lines_from = list(lines_from)
+        blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
+        self.drives = sorted(blind["drives"]["speed_loops"])
+
+    def line_free(self, r, sim):
+        """``r`` without the harmonics of the sources ``lines_from`` (their simulated angles)."""
+        if not self.lines_from:
+            return r
+        x, n, B = r.copy(), len(r), int(5 * self.fs)
+        for a in range(0, n, B):
+            b = slice(a, min(n, a + B))
+            if b.stop - b.start < B // 2:
+                continue
+            cols = []
+            for e in self.lines_from:
+                th = np.asarray(sim.columns[f"{e}.theta"])[self.i0:][b]
+                f1 = abs(th[-1] - th[0]) / (2 * np.pi) / ((b.stop - b.start - 1) / self.fs)
+                cols.append(estimate.harmonic_basis(th, range(1, int(40.0 / f1) + 1)))
+            Q = np.linalg.qr(np.hstack(cols))[0]
+            y = x[b] - x[b].mean()
+            x[b] = y - Q @ (Q.T @ y)
+        return x
+
+    def misfits(self, doc):
+        """Misfit of ``doc``'s ripple fit over each of :data:`BANDS`."""
+        s0 = self.model.simulate(self.run, doc)
+        P, G, f = {}, {e: {} for e in self.drives}, None
+        for s in SENSORS:
+            r = (np.asarray(self.run.columns[s.split(".")[0]]) - np.asarray(s0.columns[s]))[self.i0:]
+            f, p = ripple.welch(self.line_free(r, s0), self.fs)
+            P[s] = ripple.fine(p, f)
+        for e in self.drives:
+            s1 = self.model.simulate(self.run, with_sets(copy.deepcopy(doc),
+                                                         {f"drives.speed_loops.{e}.torque_noise": PROBE_TORQUE}))
+            for s in SENSORS:
+                _, p = ripple.welch((np.asarray(s1.columns[s]) - np.asarray(s0.columns[s]))[self.i0:], self.fs)
+                G[e][s] = ripple.fine(p, f)
+        # the white floor's scale from the top of the spectrum, where the line is quiet
+        S0 = {s: float(np.median(P[s][(f > 0.3 * self.fs) & (f < 0.45 * self.fs)])) for s in SENSORS}
+        ff = np.maximum(f, f[1])
+        out = []
+        for lo, hi in BANDS:
+            Gx = dict(G)
+            for s in SENSORS:
+                Gx[f"_white {s}"] = {q: (np.full_like(f, S0[s]) if q == s else np.zeros_like(f)) for q in SENSORS}
+                Gx[f"_pink {s}"] = {q: (S0[s] * lo / ff if q == s else np.zeros_like(f)) for q in SENSORS}
+            _, fit = ripple.fit_levels(P, Gx, {s: 0.0 for s in SENSORS}, f, band=(lo, hi))
+            m = (f >= lo) & (f <= hi)
+            out.append(float(np.mean(np.concatenate(
+                [np.log(np.maximum(P[s][m], 1e-300) / np.maximum(fit[s][m], 1e-300)) ** 2 for s in SENSORS]))))
+        return out
+
+
+def layouts(case, element, which):
+    """{name: (set entries on the blind layout, the element's total inertia for the scan)}."""
+    truth = yaml.safe_load(open(case / "truth" / "truth_layout.yaml"))["set"]
+    refined = yaml.safe_load(open(case / "diagnosis" / "refined_layout.yaml"))["set"]
+    blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
+    el = next(x for x in blind["path"] if x["name"] == element)
+    J_blind = float(units.quantity(el["inertia"], "inertia"))
+    drive, own = f"drives.speed_loops.{element}.drive", f"path.{element}.inertia"
+    J_truth = quantity(truth[own]) + quantity(truth[drive]["motor_inertia"]) if drive in truth else J_blind
+    rigid = {k: v for k, v in truth.items() if k != drive}
+    rigid[own] = f"{J_truth} kg*m^2"
+    lines = {k: v for k, v in truth.items() if "eccentricity" in k}
+    out = {"refined": (refined, J_blind),
+           "refined-truth-lines": ({**{k: v for k, v in refined.items() if "eccentricity" not in k}, **lines},
+                                   J_blind),
+           "truth-rigid": (rigid, J_truth)}
+    for g, pred in GROUPS.items():
+        kept = {k: v for k, v in rigid.items() if not pred(k, element)}
+        out[f"truth-but-{g}"] = (kept, J_blind if g == "own-inertia" else J_truth)
+    return {k: v for k, v in out.items() if which is None or k in which}
+
+
+GRID = {"EA": (0.87, 1.0, 1.13), "inertia": (0.75, 1.0, 1.25), "filter_order": (1, 2),
+        "feedforward": ("none", "reference")}
+GRID_RATIOS = (0.7, 0.85, 1.0, 1.2, 1.4)
+
+
+def grid(probe, case, element, mode):
+    """Rigid line and shafts, each at its best over :data:`GRID` around the refined layout."""
+    from webline.diagnosis import tolerances
+    refined = yaml.safe_load(open(case / "diagnosis" / "refined_layout.yaml"))["set"]
+    blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
+    J0 = float(units.quantity(next(x for x in blind["path"] if x["name"] == element)["inertia"], "inertia"))
+    best = {}
+    for fE, fJ, order, ff in itertools.product(*GRID.values()):
+        sets = {**refined, **tolerances.scaled_set(blind, EA=fE, inertia={element: fJ})}
+        if order == 2:
+            sets.update({f"sensors.{s}.filter_order": 2 for s in blind["sensors"]})
+        if ff == "reference":
+            sets.update({f"drives.speed_loops.{e}.feedforward": "reference" for e in probe.drives})
+        base = with_sets(probe.model.copy_doc(), sets)
+        J = J0 * fJ
+        rows = {"rigid": probe.misfits(base)}
+        for r in GRID_RATIOS:
+            rows[r] = probe.misfits(others._drive_doc(copy.deepcopy(base), (element, J, ("inertia", J)),
+                                                      r * mode, 0.0))
+        for k, v in rows.items():
+            best[k] = [min(a, b) for a, b in zip(best.get(k, v), v)]
+        print(f"  EA x{fE:g}, inertia x{fJ:g}, filter order {order}, feed-forward {ff}: rigid "
+              + " ".join(f"{x:.4f}" for x in rows["rigid"]), flush=True)
+    for k, v in best.items():
+        label = "rigid" if k == "rigid" else f"{k * mode:.2f} Hz"
+        print(f"  best {label:>9s} " + " ".join(f"{x:.4f}" for x in v))
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("case", type=Path, help="a kept case folder (truth/, blind/, diagnosis/)")
+    ap.add_argument("element", help="the driven element whose shaft is scanned (inertia given as 'inertia')")
+    ap.add_argument("--run", default="run1")
+    ap.add_argument("--layouts", nargs="*", help="names of layouts to probe (default: all)")
+    ap.add_argument("--grid", action="store_true", help="the 36-line grid around the refined layout")
+    ap.add_argument("--lines-out", action="store_true", help="take the reported sources' lines out first")
+    a = ap.parse_args(argv)
+    truth = json.load(open(a.case / "truth" / "truth.json"))
+    mode = next(e["drive"]["mode_hz"] for e in truth["effects"] if e["kind"] == "compliance")
+    report = json.load(open(a.case / "diagnosis" / "report.json"))
+    lines = [e["element"] for e in report["effects"] if e["kind"] in ("eccentricity", "out_of_round")]
+    probe = Probe(a.case, a.run, lines if a.lines_out else ())
+    print(f"truth's mode {mode:.3g} Hz; bands " + ", ".join(f"{lo:g}-{hi:g}" for lo, hi in BANDS) + " Hz"
+          + (f"; lines of {', '.join(lines)} taken out" if a.lines_out else ""))
+    if a.grid:
+        grid(probe, a.case, a.element, mode)
+        return
+    for name, (sets, J) in layouts(a.case, a.element, a.layouts).items():
+        base = with_sets(probe.model.copy_doc(), sets)
+        print(f"== {name}\n  {'rigid':>9s} " + " ".join(f"{x:.4f}" for x in probe.misfits(base)), flush=True)
+        for r in RATIOS:
+            doc = others._drive_doc(copy.deepcopy(base), (a.element, J, ("inertia", J)), r * mode, 0.0)
+            print(f"  {r * mode:6.2f} Hz " + " ".join(f"{x:.4f}" for x in probe.misfits(doc))
+                  + ("  <- truth" if r == 1.0 else ""), flush=True)
+
+
+if __name__ == "__main__":
+    main()
