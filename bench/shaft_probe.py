@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from webline.diagnosis import estimate, layout_edit, others, ripple
+from webline.diagnosis import compliance, estimate, layout_edit, others, ripple, tolerances
 from webline.diagnosis import runs as R
 from webline.diagnosis.line_model import LineModel
 from webline.orchestrator import units
@@ -71,10 +71,6 @@ def with_sets(doc, sets):
     return doc
 
 
-def quantity(text):
-    return float(str(text).split()[0])
-
-
 class Probe:
     """One case's run, its model and the spectral fit of a layout to its residual."""
 
@@ -85,8 +81,13 @@ class Probe:
         self.fs = 1.0 / float(np.median(np.diff(t)))
         self.i0 = len(t) // 6            # the start's transient left out
         self.lines_from = list(lines_from)
-        blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
-        self.drives = sorted(blind["drives"]["speed_loops"])
+        self.blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
+        self.drives = sorted(self.blind["drives"]["speed_loops"])
+
+    def inertia(self, element):
+        """The blind layout's inertia of ``element`` (kg m^2)."""
+        el = next(x for x in self.blind["path"] if x["name"] == element)
+        return float(units.quantity(el["inertia"], "inertia"))
 
     def line_free(self, r, sim):
         """``r`` without the harmonics of the sources ``lines_from`` (their simulated angles)."""
@@ -123,29 +124,22 @@ class Probe:
                 G[e][s] = ripple.fine(p, f)
         # the white floor's scale from the top of the spectrum, where the line is quiet
         S0 = {s: float(np.median(P[s][(f > 0.3 * self.fs) & (f < 0.45 * self.fs)])) for s in SENSORS}
-        ff = np.maximum(f, f[1])
         out = []
         for lo, hi in BANDS:
-            Gx = dict(G)
-            for s in SENSORS:
-                Gx[f"_white {s}"] = {q: (np.full_like(f, S0[s]) if q == s else np.zeros_like(f)) for q in SENSORS}
-                Gx[f"_pink {s}"] = {q: (S0[s] * lo / ff if q == s else np.zeros_like(f)) for q in SENSORS}
-            _, fit = ripple.fit_levels(P, Gx, {s: 0.0 for s in SENSORS}, f, band=(lo, hi))
-            m = (f >= lo) & (f <= hi)
-            out.append(float(np.mean(np.concatenate(
-                [np.log(np.maximum(P[s][m], 1e-300) / np.maximum(fit[s][m], 1e-300)) ** 2 for s in SENSORS]))))
+            _, fit = ripple.fit_levels(P, compliance.with_floors(G, S0, f, lo), {s: 0.0 for s in SENSORS}, f,
+                                       band=(lo, hi))
+            out.append(compliance.log_misfit(P, fit, (f >= lo) & (f <= hi))[0])
         return out
 
 
-def layouts(case, element, which):
+def layouts(probe, case, element, which):
     """{name: (set entries on the blind layout, the element's total inertia for the scan)}."""
     truth = yaml.safe_load(open(case / "truth" / "truth_layout.yaml"))["set"]
     refined = yaml.safe_load(open(case / "diagnosis" / "refined_layout.yaml"))["set"]
-    blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
-    el = next(x for x in blind["path"] if x["name"] == element)
-    J_blind = float(units.quantity(el["inertia"], "inertia"))
+    J_blind = probe.inertia(element)
     drive, own = f"drives.speed_loops.{element}.drive", f"path.{element}.inertia"
-    J_truth = quantity(truth[own]) + quantity(truth[drive]["motor_inertia"]) if drive in truth else J_blind
+    J_truth = (float(units.quantity(truth[own], "inertia"))
+               + float(units.quantity(truth[drive]["motor_inertia"], "inertia"))) if drive in truth else J_blind
     rigid = {k: v for k, v in truth.items() if k != drive}
     rigid[own] = f"{J_truth} kg*m^2"
     lines = {k: v for k, v in truth.items() if "eccentricity" in k}
@@ -166,10 +160,8 @@ GRID_RATIOS = (0.7, 0.85, 1.0, 1.2, 1.4)
 
 def grid(probe, case, element, mode):
     """Rigid line and shafts, each at its best over :data:`GRID` around the refined layout."""
-    from webline.diagnosis import tolerances
     refined = yaml.safe_load(open(case / "diagnosis" / "refined_layout.yaml"))["set"]
-    blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
-    J0 = float(units.quantity(next(x for x in blind["path"] if x["name"] == element)["inertia"], "inertia"))
+    blind, J0 = probe.blind, probe.inertia(element)
     best = {}
     for fE, fJ, order, ff in itertools.product(*GRID.values()):
         sets = {**refined, **tolerances.scaled_set(blind, EA=fE, inertia={element: fJ})}
@@ -211,7 +203,7 @@ def main(argv=None):
     if a.grid:
         grid(probe, a.case, a.element, mode)
         return
-    for name, (sets, J) in layouts(a.case, a.element, a.layouts).items():
+    for name, (sets, J) in layouts(probe, a.case, a.element, a.layouts).items():
         base = with_sets(probe.model.copy_doc(), sets)
         print(f"== {name}\n  {'rigid':>9s} " + " ".join(f"{x:.4f}" for x in probe.misfits(base)), flush=True)
         for r in RATIOS:

@@ -159,17 +159,12 @@ def spectral_fit(d, noise, doc, sims, hump, G=None, lines_out=False, levels=None
         _, p = ripple.welch(line_free(d, c, r) if lines_out else r[c.mask], c.fs)
         P[s] = ripple.fine(p, f)
         S0[s] = noise[c.name][s]["psd_N2_per_hz"]
-    Gx = dict(G[c.name])
-    ff = np.maximum(f, f[1])
-    for s in P:  # free floors, per sensor (scaled near the data so the solver sees them)
-        Gx[f"_white {s}"] = {q: (np.full_like(f, S0[s]) if q == s else np.zeros_like(f)) for q in P}
-        Gx[f"_pink {s}"] = {q: (S0[s] * band[0] / ff if q == s else np.zeros_like(f)) for q in P}
+    Gx = with_floors(G[c.name], S0, f, band[0])
     if levels is None:
         levels, R = ripple.fit_levels(P, Gx, {s: 0.0 for s in P}, f, band=band)
     else:
         levels, R = _floors_under(P, Gx, {e: levels.get(e, 0.0) ** 2 for e in G[c.name]}, f, band)
-    per = {s: np.log(np.maximum(P[s][m], 1e-300) / np.maximum(R[s][m], 1e-300)) ** 2 for s in P}
-    mis = float(np.mean(np.concatenate(list(per.values()))))
+    mis, per = log_misfit(P, R, m)
     s = hump["sensor"]
     floor = sum(levels[k] * Gx[k][s] for k in Gx if k.startswith("_"))
     rip = R[s] - floor
@@ -180,6 +175,26 @@ def spectral_fit(d, noise, doc, sims, hump, G=None, lines_out=False, levels=None
               for e in Gx if not e.startswith("_")}
     return (mis, x, {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")}, shares,
             {s: float(np.mean(v)) for s, v in per.items()})
+
+
+def with_floors(G, S0, f, lo):
+    """The drives' responses ``G`` ({drive: {sensor: PSD}}) with a free white and a 1/f
+    floor per sensor, keys starting with '_': the floor near a mode is not the sensor's
+    white noise alone. Each is scaled near the data (``S0``: the sensor's white level,
+    ``lo``: the band's lower edge) so the solver sees them."""
+    Gx = dict(G)
+    ff = np.maximum(f, f[1])
+    for s in S0:
+        Gx[f"_white {s}"] = {q: (np.full_like(f, S0[s]) if q == s else np.zeros_like(f)) for q in S0}
+        Gx[f"_pink {s}"] = {q: (S0[s] * lo / ff if q == s else np.zeros_like(f)) for q in S0}
+    return Gx
+
+
+def log_misfit(P, R, m):
+    """(mean over sensors and the bins ``m`` of the squared log ratio of data ``P`` to fit
+    ``R``, {sensor: the same per sensor's bins})."""
+    per = {s: np.log(np.maximum(P[s][m], 1e-300) / np.maximum(R[s][m], 1e-300)) ** 2 for s in P}
+    return float(np.mean(np.concatenate(list(per.values())))), per
 
 
 def _floors_under(P, Gx, fixed, f, band):
