@@ -27,7 +27,6 @@ the line calibrated")::
         --forms as ref none --lag --mode 10 --ratios 0.5 0.7 1.0 1.4 2.0 --maxfev 60 --band 4 24 [--lines-out]
 """
 import argparse
-import copy
 import dataclasses
 import json
 import sys
@@ -41,34 +40,10 @@ from scipy import optimize
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import shaft_probe as SP  # noqa: E402
 
-from webline.diagnosis import compliance, others, ripple, tolerances  # noqa: E402
+from webline.diagnosis import others, ripple, tolerances  # noqa: E402
 from webline.orchestrator import modes as M  # noqa: E402
 from webline.orchestrator import units  # noqa: E402
-
-
-def residual_psd(probe, doc):
-    """(P, S0, f, sim): the residual's fine Welch view per load cell of ``doc``'s
-    simulation (the probe's lines taken out), its white level, the frequencies."""
-    s0 = probe.model.simulate(probe.run, doc)
-    P, f = {}, None
-    for s in SP.SENSORS:
-        r = (np.asarray(probe.run.columns[s.split(".")[0]]) - np.asarray(s0.columns[s]))[probe.i0:]
-        f, p = ripple.welch(probe.line_free(r, s0), probe.fs)
-        P[s] = ripple.fine(p, f)
-    S0 = {s: float(np.median(P[s][(f > 0.3 * probe.fs) & (f < 0.45 * probe.fs)])) for s in SP.SENSORS}
-    return P, S0, f, s0
-
-
-def sim_responses(probe, doc, s0, f):
-    """The simulated ripple responses (``shaft_probe``'s recipe), for ``--validate``."""
-    G = {e: {} for e in probe.drives}
-    for e in probe.drives:
-        s1 = probe.model.simulate(probe.run, SP.with_sets(copy.deepcopy(doc),
-                                                          {f"drives.speed_loops.{e}.torque_noise": SP.PROBE_TORQUE}))
-        for s in SP.SENSORS:
-            _, p = ripple.welch((np.asarray(s1.columns[s]) - np.asarray(s0.columns[s]))[probe.i0:], probe.fs)
-            G[e][s] = ripple.fine(p, f)
-    return G
+from webline.orchestrator.layout_source import load_located, plain  # noqa: E402
 
 
 def lin_responses(probe, doc, f, speed):
@@ -81,33 +56,16 @@ def lin_responses(probe, doc, f, speed):
     for e in probe.drives:
         # not at 0 Hz: a shaft's twist is an integrator there
         T = M.torque_transfer(lin, e, np.maximum(f, f[1]))
-        # at the simulated probe's density (white, PROBE_TORQUE held over 2 ms): the level fit's
-        # solver stops on absolute tolerances, so the responses must sit near the data's scale
-        scale = 2.0 * 0.05 ** 2 * 2e-3
+        # at the simulated probe's density (white, PROBE_TORQUE held over 2 ms), so that
+        # --validate compares the two directly; the fit's free levels absorb the scale
+        scale = 2.0 * float(units.quantity(SP.PROBE_TORQUE, "torque")) ** 2 * 2e-3
         G[e] = {s: scale * ripple.fine(np.abs(T[lin.outputs.index(s)]) ** 2, f) for s in SP.SENSORS}
     return G
 
 
-def misfit(P, G, S0, f, band):
-    """``compliance.spectral_fit``'s misfit of responses ``G`` to ``P`` over ``band``."""
-    lo, hi = band
-    _, fit = ripple.fit_levels(P, compliance.with_floors(G, S0, f, lo), {s: 0.0 for s in SP.SENSORS}, f, band=band)
-    return compliance.log_misfit(P, fit, (f >= lo) & (f <= hi))[0]
-
-
-def effective(blind, sets):
-    """The blind layout (a dict as written) with the dotted ``sets`` written in."""
-    doc = copy.deepcopy(blind)
-    for key, v in sets.items():
-        parts = key.split(".")
-        node = doc
-        for i, k in enumerate(parts[:-1]):
-            if isinstance(node, list):
-                node = next(x for x in node if x.get("name") == k)
-            else:
-                node = node.setdefault(k, {})
-        node[parts[-1]] = v
-    return doc
+def resolved(probe, sets):
+    """The blind layout with ``sets`` written in, as the layout loader reads it (plain data)."""
+    return plain(load_located(probe.model.path, sets))
 
 
 LAG0 = 3e-3
@@ -133,8 +91,9 @@ class Calib:
         if form.get("order") == 2:
             extra.update({f"sensors.{q}.filter_order": 2 for q in probe.blind["sensors"]})
         self.base_sets = {**base_sets, **extra}
+        # scale factors apply to the base layout's own values (the truth's, the refined one's)
+        self.base = resolved(probe, self.base_sets)
         self.lag = bool(form.get("lag"))
-        self.blind = probe.blind
         self.names = []
         if "EA" in free:
             self.names.append("EA")
@@ -150,9 +109,8 @@ class Calib:
 
     def doc(self, x):
         sc = dict(zip(self.names, np.exp(x)))
-        base = effective(self.blind, self.base_sets)
+        base = self.base
         inert = {e: sc[f"J:{e}"] for e in self.probe.drives if f"J:{e}" in sc}
-        # scaled from the base layout's own values (the truth's, the refined one's), not the blind's
         sets = tolerances.scaled_set(base, EA=sc.get("EA", 1.0), inertia=inert)
         if "filter" in sc:
             for s, v in base["sensors"].items():
@@ -183,12 +141,12 @@ class Calib:
             try:
                 doc = self.doc(x)
                 # the residual of this line: the run-outs' lines pass through it too
-                P, S0, f, _ = fixed if fixed is not None else residual_psd(self.probe, doc)
+                P, S0, f, _ = fixed if fixed is not None else self.probe.residual(doc)
                 G = lin_responses(self.probe, doc, f, self.speed)
             except Exception as exc:  # noqa: BLE001 - a layout the line cannot hold
                 print("    failed:", str(exc).splitlines()[0] if str(exc) else repr(exc))
                 return 1e3
-            return misfit(P, G, S0, f, band)
+            return SP.misfit(P, G, S0, f, band)
 
         c0 = cost(x0)
         r = optimize.minimize(cost, x0, method="Nelder-Mead",
@@ -227,8 +185,7 @@ def main(argv=None):
         sets = yaml.safe_load(open(a.case / "diagnosis" / "refined_layout.yaml"))["set"] or {}
     else:
         sets, _ = SP.layouts(probe, a.case, a.element, [a.layout])[a.layout]
-    eff = effective(probe.blind, sets)
-    ee = next(x for x in eff["path"] if x["name"] == a.element)
+    ee = next(x for x in resolved(probe, sets)["path"] if x["name"] == a.element)
     if "core_inertia" in el:
         sim0 = probe.model.simulate(probe.run, SP.with_sets(probe.model.copy_doc(), sets))
         J_shaft = (float(np.mean(np.asarray(sim0.columns[f"{a.element}.J"])[probe.i0:])),
@@ -236,14 +193,14 @@ def main(argv=None):
     else:
         J_shaft = float(units.quantity(ee["inertia"], "inertia"))
     base = SP.with_sets(probe.model.copy_doc(), sets)
-    P, S0, f, s0 = residual_psd(probe, base)
+    P, S0, f, s0 = probe.residual(base)
     # linearised at the run's mean line speed: the master's surface speed
     master = probe.blind["drives"]["master"]
     speed = float(np.mean(np.asarray(s0.columns[f"{master}.omega"])[probe.i0:])) * float(
         units.quantity(next(x for x in probe.blind["path"] if x["name"] == master)["radius"], "length"))
     print(f"truth's mode {mode:.3g} Hz; band {a.band}; line speed {speed:.4g} m/s; lines out: {a.lines_out}")
     if a.validate:
-        Gs = sim_responses(probe, base, s0, f)
+        Gs = probe.responses(base, s0, f)
         Gl = lin_responses(probe, base, f, speed)
         m = (f >= 1) & (f <= 30)
         for e in probe.drives:
@@ -251,8 +208,9 @@ def main(argv=None):
                 q = Gs[e][s][m] / Gl[e][s][m]
                 print(f"  {e:>10s} {s}: sim/lin median {np.median(q):.4g}, spread (p10-p90) "
                       f"{np.percentile(q, 10) / np.median(q):.3f}-{np.percentile(q, 90) / np.median(q):.3f}")
-        print(f"  misfit sim {misfit(P, Gs, S0, f, a.band):.4f}, lin {misfit(P, Gl, S0, f, a.band):.4f}")
-    rows = [("rigid", None)] + [(f"{r * mode:.2f} Hz" + (" <- " + ("mode" if a.mode else "truth") if r == 1.0 else ""), (a.element, r * mode))
+        print(f"  misfit sim {SP.misfit(P, Gs, S0, f, a.band):.4f}, lin {SP.misfit(P, Gl, S0, f, a.band):.4f}")
+    mark = " <- " + ("mode" if a.mode else "truth")
+    rows = [("rigid", None)] + [(f"{r * mode:.2f} Hz" + (mark if r == 1.0 else ""), (a.element, r * mode))
                                 for r in a.ratios]
     best = {}
     for label, shaft in rows:
@@ -266,6 +224,7 @@ def main(argv=None):
                   + " ".join(f"{k} x{v:.3f}" for k, v in sc.items()) + f"  ({n} evals, {time.time() - t0:.0f} s)",
                   flush=True)
     print("best over forms: " + ", ".join(f"{k} {v[0]:.4f} ({v[1]})" for k, v in best.items()))
+
 
 if __name__ == "__main__":
     main()

@@ -108,29 +108,44 @@ class Probe:
             x[b] = y - Q @ (Q.T @ y)
         return x
 
-    def misfits(self, doc):
-        """Misfit of ``doc``'s ripple fit over each of :data:`BANDS`."""
+    def residual(self, doc):
+        """(P, S0, f, sim): the fine Welch view of the residual of ``doc``'s simulation per
+        load cell (the lines of ``lines_from`` taken out), its white level, the frequencies."""
         s0 = self.model.simulate(self.run, doc)
-        P, G, f = {}, {e: {} for e in self.drives}, None
+        P, f = {}, None
         for s in SENSORS:
             r = (np.asarray(self.run.columns[s.split(".")[0]]) - np.asarray(s0.columns[s]))[self.i0:]
             f, p = ripple.welch(self.line_free(r, s0), self.fs)
             P[s] = ripple.fine(p, f)
+        # the white floor's scale from the top of the spectrum, where the line is quiet
+        S0 = {s: float(np.median(P[s][(f > 0.3 * self.fs) & (f < 0.45 * self.fs)])) for s in SENSORS}
+        return P, S0, f, s0
+
+    def responses(self, doc, s0, f):
+        """{drive: {sensor: fine PSD}}: each drive's simulated ripple response in ``doc``
+        (simulated as ``s0``), one simulation with :data:`PROBE_TORQUE` on that drive."""
+        G = {e: {} for e in self.drives}
         for e in self.drives:
             s1 = self.model.simulate(self.run, with_sets(copy.deepcopy(doc),
                                                          {f"drives.speed_loops.{e}.torque_noise": PROBE_TORQUE}))
             for s in SENSORS:
                 _, p = ripple.welch((np.asarray(s1.columns[s]) - np.asarray(s0.columns[s]))[self.i0:], self.fs)
                 G[e][s] = ripple.fine(p, f)
-        # the white floor's scale from the top of the spectrum, where the line is quiet
-        S0 = {s: float(np.median(P[s][(f > 0.3 * self.fs) & (f < 0.45 * self.fs)])) for s in SENSORS}
-        out = []
-        for lo, hi in BANDS:
-            _, fit = ripple.fit_levels(P, compliance.with_floors(G, S0, f, lo), {s: 0.0 for s in SENSORS}, f,
-                                       band=(lo, hi))
-            out.append(compliance.log_misfit(P, fit, (f >= lo) & (f <= hi))[0])
-        return out
+        return G
 
+    def misfits(self, doc):
+        """Misfit of ``doc``'s ripple fit over each of :data:`BANDS`."""
+        P, S0, f, s0 = self.residual(doc)
+        G = self.responses(doc, s0, f)
+        return [misfit(P, G, S0, f, band) for band in BANDS]
+
+
+def misfit(P, G, S0, f, band):
+    """:func:`diagnosis.compliance.spectral_fit`'s misfit of the responses ``G`` to ``P``
+    over ``band``: every drive's level and the floors free."""
+    lo, hi = band
+    _, fit = ripple.fit_levels(P, compliance.with_floors(G, S0, f, lo), {s: 0.0 for s in P}, f, band=band)
+    return compliance.log_misfit(P, fit, (f >= lo) & (f <= hi))[0]
 
 def layouts(probe, case, element, which):
     """{name: (set entries on the blind layout, the element's total inertia for the scan)}."""
