@@ -158,7 +158,7 @@ class Calib:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("case", type=Path)
-    ap.add_argument("element")
+    ap.add_argument("element", help="a driven element, several joined by commas, or 'all'")
     ap.add_argument("--run", default="run1")
     ap.add_argument("--band", nargs=2, type=float, default=(3.15, 12.6))
     ap.add_argument("--validate", action="store_true")
@@ -172,26 +172,21 @@ def main(argv=None):
     ap.add_argument("--mode", type=float, help="scan around this mode (Hz) instead of the truth's")
     ap.add_argument("--forms", nargs="*", default=["as"], help=f"of {', '.join(FORMS)}")
     ap.add_argument("--lag", action="store_true", help="a current lag in every drive, calibrated")
+    ap.add_argument("--json", help="write the rigid line's and each drive's best shaft's misfits here")
     a = ap.parse_args(argv)
     truth = json.load(open(a.case / "truth" / "truth.json"))
     mode = a.mode or next(e["drive"]["mode_hz"] for e in truth["effects"] if e["kind"] == "compliance")
+    # (a truth without a shaft needs --mode)
     report = json.load(open(a.case / "diagnosis" / "report.json"))
     lines = [e["element"] for e in report["effects"] if e["kind"] in ("eccentricity", "out_of_round")]
     probe = SP.Probe(a.case, a.run, a.lines if a.lines is not None else (lines if a.lines_out else ()))
-    el = next(x for x in probe.blind["path"] if x["name"] == a.element)
     if a.layout == "blind":
         sets = {}
     elif a.layout == "refined":
         sets = yaml.safe_load(open(a.case / "diagnosis" / "refined_layout.yaml"))["set"] or {}
     else:
         sets, _ = SP.layouts(probe, a.case, a.element, [a.layout])[a.layout]
-    ee = next(x for x in resolved(probe, sets)["path"] if x["name"] == a.element)
-    if "core_inertia" in el:
-        sim0 = probe.model.simulate(probe.run, SP.with_sets(probe.model.copy_doc(), sets))
-        J_shaft = (float(np.mean(np.asarray(sim0.columns[f"{a.element}.J"])[probe.i0:])),
-                   float(units.quantity(ee["core_inertia"], "inertia")))
-    else:
-        J_shaft = float(units.quantity(ee["inertia"], "inertia"))
+        probe.conditions("truth")
     base = SP.with_sets(probe.model.copy_doc(), sets)
     P, S0, f, s0 = probe.residual(base)
     # linearised at the run's mean line speed: the master's surface speed
@@ -210,11 +205,22 @@ def main(argv=None):
                       f"{np.percentile(q, 10) / np.median(q):.3f}-{np.percentile(q, 90) / np.median(q):.3f}")
         print(f"  misfit sim {SP.misfit(P, Gs, S0, f, a.band):.4f}, lin {SP.misfit(P, Gl, S0, f, a.band):.4f}")
     mark = " <- " + ("mode" if a.mode else "truth")
-    rows = [("rigid", None)] + [(f"{r * mode:.2f} Hz" + (mark if r == 1.0 else ""), (a.element, r * mode))
-                                for r in a.ratios]
+    elements = probe.drives if a.element == "all" else a.element.split(",")
+    rows = [("rigid", None, None)] + [
+        ((f"{e} " if len(elements) > 1 else "") + f"{r * mode:.2f} Hz" + (mark if r == 1.0 else ""), (e, r * mode),
+         shaft_inertia(probe, sets, e)) for e in elements for r in a.ratios]
+    # forms that write the same layout fit the same; 'none' and 'reference' feed forward
+    # a constant at a steady speed, so the linearised line is the same in both
+    forms = list(dict.fromkeys(a.forms, None))
+    ff0 = resolved(probe, sets)["drives"]["speed_loops"]
+    if "as" in forms and all(str(v.get("feedforward", "measured")) in ("reference", "False", "none")
+                             for v in ff0.values()):
+        forms.remove("as")
+    if "ref" in forms and "none" in forms:
+        forms.remove("none")
     best = {}
-    for label, shaft in rows:
-        for fname in a.forms:
+    for label, shaft, J_shaft in rows:
+        for fname in forms:
             t0 = time.time()
             cal = Calib(probe, sets, speed, shaft, free=a.free, J_shaft=J_shaft, form={**FORMS[fname], "lag": a.lag})
             c0, c1, sc, n = cal.fit(tuple(a.band), maxfev=a.maxfev,
@@ -224,6 +230,30 @@ def main(argv=None):
                   + " ".join(f"{k} x{v:.3f}" for k, v in sc.items()) + f"  ({n} evals, {time.time() - t0:.0f} s)",
                   flush=True)
     print("best over forms: " + ", ".join(f"{k} {v[0]:.4f} ({v[1]})" for k, v in best.items()))
+    rigid = best["rigid"][0]
+    per = {}
+    for label, shaft, _ in rows[1:]:
+        m = best[label][0]
+        if shaft[0] not in per or m < per[shaft[0]][0]:
+            per[shaft[0]] = (m, shaft[1], best[label][1])
+    for e, (m, hz, fname) in per.items():
+        print(f"ratio {e}: rigid {rigid:.4f} / {m:.4f} at {hz:.2f} Hz ({fname}) = {rigid / m:.3f}")
+    if a.json:
+        json.dump({"case": str(a.case), "run": a.run, "band": list(a.band), "forms": forms, "rigid": rigid,
+                   "drives": {e: {"misfit": m, "mode_hz": hz, "form": fn, "ratio": rigid / m}
+                              for e, (m, hz, fn) in per.items()}}, open(a.json, "w"), indent=1)
+
+
+def shaft_inertia(probe, sets, element):
+    """What ``others._drive_doc`` splits into motor and roll for ``element``'s shaft: a
+    roll's (total at the run's middle, core), a roller's inertia."""
+    el = next(x for x in probe.blind["path"] if x["name"] == element)
+    ee = next(x for x in resolved(probe, sets)["path"] if x["name"] == element)
+    if "core_inertia" in el:
+        sim0 = probe.model.simulate(probe.run, SP.with_sets(probe.model.copy_doc(), sets))
+        return (float(np.mean(np.asarray(sim0.columns[f"{element}.J"])[probe.i0:])),
+                float(units.quantity(ee["core_inertia"], "inertia")))
+    return float(units.quantity(ee["inertia"], "inertia"))
 
 
 if __name__ == "__main__":
