@@ -178,6 +178,22 @@ def test_harmonic_gains_follow_the_layout_convention(ewl):
         M.element_ends(system, "nope")
 
 
+def test_transfer_is_the_resolvent_at_every_frequency_across_chunks(ewl):
+    """G(s) = C (sI - A)^-1 (B + s B_rate) + D, solved in batches of TRANSFER_CHUNK
+    frequencies: each frequency of a sweep longer than a chunk gives what it gives alone,
+    and that is the resolvent written out (a complex solve at double precision)."""
+    _, lin, _ = ewl
+    f = np.linspace(0.05, 40.0, M.TRANSFER_CHUNK + 37)
+    cols = ["sw_leader.tau", "span2.up"]
+    G = lin.transfer(f, cols)
+    i = [lin.inputs.index(c) for c in cols]
+    for k in (0, M.TRANSFER_CHUNK - 1, M.TRANSFER_CHUNK, len(f) - 1):
+        s = 2j * np.pi * f[k]
+        X = np.linalg.inv(s * np.eye(lin.A.shape[0]) - lin.A) @ (lin.B[:, i] + s * lin.B_rate[:, i])
+        assert G[k] == pytest.approx(lin.C @ X + lin.D[:, i], rel=1e-9, abs=1e-12)
+        assert lin.transfer([f[k]], cols)[0] == pytest.approx(G[k], rel=1e-12, abs=1e-15)
+
+
 def test_cli_table_json_png(tmp_path, capsys):
     from webline.orchestrator.modes_cmd import main
     assert main([str(EWL), "--out", str(tmp_path), "--fmax", "60"]) == 0
