@@ -52,14 +52,13 @@ def lin_responses(probe, doc, f, speed):
                                                     "experiment.line_speed": f"{speed:.12g} m/s"})
     system = probe.model.system(run, doc)
     lin = M.linearise_system(system)
-    G = {}
-    for e in probe.drives:
-        # not at 0 Hz: a shaft's twist is an integrator there
-        T = M.torque_transfer(lin, e, np.maximum(f, f[1]))
-        # at the simulated probe's density (white, PROBE_TORQUE held over 2 ms), so that
-        # --validate compares the two directly; the fit's free levels absorb the scale
-        scale = 2.0 * float(units.quantity(SP.PROBE_TORQUE, "torque")) ** 2 * 2e-3
-        G[e] = {s: scale * ripple.fine(np.abs(T[lin.outputs.index(s)]) ** 2, f) for s in SP.SENSORS}
+    # not at 0 Hz: a shaft's twist is an integrator there; every drive in one solve
+    T = lin.transfer(np.maximum(f, f[1]), [f"{e}.tau" for e in probe.drives])
+    # at the simulated probe's density (white, PROBE_TORQUE held over 2 ms), so that
+    # --validate compares the two directly; the fit's free levels absorb the scale
+    scale = 2.0 * float(units.quantity(SP.PROBE_TORQUE, "torque")) ** 2 * 2e-3
+    G = {e: {s: scale * ripple.fine(np.abs(T[:, lin.outputs.index(s), j]) ** 2, f) for s in SP.SENSORS}
+         for j, e in enumerate(probe.drives)}
     return G
 
 
@@ -172,6 +171,7 @@ def main(argv=None):
     ap.add_argument("--mode", type=float, help="scan around this mode (Hz) instead of the truth's")
     ap.add_argument("--forms", nargs="*", default=["as"], help=f"of {', '.join(FORMS)}")
     ap.add_argument("--lag", action="store_true", help="a current lag in every drive, calibrated")
+    ap.add_argument("--window", default="steady", choices=("steady", "all"), help="see shaft_probe.Probe.pieces")
     ap.add_argument("--json", help="write the rigid line's and each drive's best shaft's misfits here")
     a = ap.parse_args(argv)
     truth = json.load(open(a.case / "truth" / "truth.json"))
@@ -179,7 +179,8 @@ def main(argv=None):
     # (a truth without a shaft needs --mode)
     report = json.load(open(a.case / "diagnosis" / "report.json"))
     lines = [e["element"] for e in report["effects"] if e["kind"] in ("eccentricity", "out_of_round")]
-    probe = SP.Probe(a.case, a.run, a.lines if a.lines is not None else (lines if a.lines_out else ()))
+    probe = SP.Probe(a.case, a.run, a.lines if a.lines is not None else (lines if a.lines_out else ()),
+                     window=a.window)
     if a.layout == "blind":
         sets = {}
     elif a.layout == "refined":

@@ -40,7 +40,7 @@ import numpy as np
 import yaml
 
 from webline.diagnosis import benchmark as B
-from webline.diagnosis import compliance, estimate, layout_edit, others, ripple, tolerances
+from webline.diagnosis import candidates, compliance, estimate, layout_edit, others, ripple, tolerances
 from webline.diagnosis import runs as R
 from webline.diagnosis.line_model import LineModel
 from webline.orchestrator import units
@@ -76,7 +76,7 @@ def with_sets(doc, sets):
 class Probe:
     """One case's run, its model and the spectral fit of a layout to its residual."""
 
-    def __init__(self, case, run_name, lines_from=()):
+    def __init__(self, case, run_name, lines_from=(), window="steady"):
         self.model = LineModel(str(case / "blind" / "line.yaml"))
         self.run_sheet = R.load_run(str(case / "blind" / f"{run_name}.yaml"))
         self.case, self.run_name = case, run_name
@@ -86,6 +86,7 @@ class Probe:
         self.fs = 1.0 / float(np.median(np.diff(t)))
         self.i0 = len(t) // 6            # the start's transient left out
         self.lines_from = list(lines_from)
+        self.window = window
         self.blind = yaml.safe_load(open(case / "blind" / "line.yaml"))
         self.drives = sorted(self.blind["drives"]["speed_loops"])
 
@@ -115,24 +116,40 @@ class Probe:
         el = next(x for x in self.blind["path"] if x["name"] == element)
         return float(units.quantity(el["inertia"], "inertia"))
 
+    def pieces(self, sim):
+        """Index arrays of the samples the spectrum is taken over, after the start's
+        transient: with ``window`` "steady" (the default), each steady-speed window of the
+        run as the diagnosis's fit mask has it (``estimate.steady_mask`` of the line speed),
+        whose lines keep one amplitude each; "all", every sample in 5 s blocks (the
+        fifty-ninth session's recipe: across a ramp a line sweeps through the line's
+        response within a block, and seed-56 c10's order 4 left lc9's 12-16 Hz at 5 x the
+        floor with the lines projected out)."""
+        n = len(self.run.t)
+        if self.window == "all":
+            B = int(5 * self.fs)
+            return [np.arange(a, min(n, a + B)) for a in range(self.i0, n, B)]
+        sp = candidates.line_speed_column(sim.system, sim.columns)
+        mask = estimate.steady_mask(np.asarray(sim.columns[sp]), self.fs) & (np.arange(n) >= self.i0)
+        idx = np.flatnonzero(mask)
+        return [p for p in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if len(p) > 1]
+
     def line_free(self, r, sim):
-        """``r`` without the harmonics of the sources ``lines_from`` (their simulated angles)."""
-        if not self.lines_from:
-            return r
-        x, n, B = r.copy(), len(r), int(5 * self.fs)
-        for a in range(0, n, B):
-            b = slice(a, min(n, a + B))
-            if b.stop - b.start < B // 2:
-                continue
-            cols = []
-            for e in self.lines_from:
-                th = np.asarray(sim.columns[f"{e}.theta"])[self.i0:][b]
-                f1 = abs(th[-1] - th[0]) / (2 * np.pi) / ((b.stop - b.start - 1) / self.fs)
-                cols.append(estimate.harmonic_basis(th, range(1, int(40.0 / f1) + 1)))
-            Q = np.linalg.qr(np.hstack(cols))[0]
-            y = x[b] - x[b].mean()
-            x[b] = y - Q @ (Q.T @ y)
-        return x
+        """``r`` (over the run's samples) on :meth:`pieces`, concatenated, without the
+        harmonics of the sources ``lines_from`` (their simulated angles), each piece fitted
+        on its own."""
+        out = []
+        for b in self.pieces(sim):
+            y = r[b] - r[b].mean()
+            if self.lines_from and len(b) >= 2.5 * self.fs:
+                cols = []
+                for e in self.lines_from:
+                    th = np.asarray(sim.columns[f"{e}.theta"])[b]
+                    f1 = abs(th[-1] - th[0]) / (2 * np.pi) / ((len(b) - 1) / self.fs)
+                    cols.append(estimate.harmonic_basis(th, range(1, int(40.0 / f1) + 1)))
+                Q = np.linalg.qr(np.hstack(cols))[0]
+                y = y - Q @ (Q.T @ y)
+            out.append(y)
+        return np.concatenate(out)
 
     def residual(self, doc):
         """(P, S0, f, sim): the fine Welch view of the residual of ``doc``'s simulation per
@@ -140,7 +157,7 @@ class Probe:
         s0 = self.model.simulate(self.run, doc)
         P, f = {}, None
         for s in SENSORS:
-            r = (np.asarray(self.run.columns[s.split(".")[0]]) - np.asarray(s0.columns[s]))[self.i0:]
+            r = np.asarray(self.run.columns[s.split(".")[0]]) - np.asarray(s0.columns[s])
             f, p = ripple.welch(self.line_free(r, s0), self.fs)
             P[s] = ripple.fine(p, f)
         # the white floor's scale from the top of the spectrum, where the line is quiet
@@ -155,7 +172,8 @@ class Probe:
             s1 = self.model.simulate(self.run, with_sets(copy.deepcopy(doc),
                                                          {f"drives.speed_loops.{e}.torque_noise": PROBE_TORQUE}))
             for s in SENSORS:
-                _, p = ripple.welch((np.asarray(s1.columns[s]) - np.asarray(s0.columns[s]))[self.i0:], self.fs)
+                d = np.asarray(s1.columns[s]) - np.asarray(s0.columns[s])
+                _, p = ripple.welch(np.concatenate([d[b] - d[b].mean() for b in self.pieces(s0)]), self.fs)
                 G[e][s] = ripple.fine(p, f)
         return G
 
@@ -233,12 +251,13 @@ def main(argv=None):
     ap.add_argument("--layouts", nargs="*", help="names of layouts to probe (default: all)")
     ap.add_argument("--grid", action="store_true", help="the 36-line grid around the refined layout")
     ap.add_argument("--lines-out", action="store_true", help="take the reported sources' lines out first")
+    ap.add_argument("--window", default="steady", choices=("steady", "all"), help="see Probe.pieces")
     a = ap.parse_args(argv)
     truth = json.load(open(a.case / "truth" / "truth.json"))
     mode = next(e["drive"]["mode_hz"] for e in truth["effects"] if e["kind"] == "compliance")
     report = json.load(open(a.case / "diagnosis" / "report.json"))
     lines = [e["element"] for e in report["effects"] if e["kind"] in ("eccentricity", "out_of_round")]
-    probe = Probe(a.case, a.run, lines if a.lines_out else ())
+    probe = Probe(a.case, a.run, lines if a.lines_out else (), window=a.window)
     print(f"truth's mode {mode:.3g} Hz; bands " + ", ".join(f"{lo:g}-{hi:g}" for lo, hi in BANDS) + " Hz"
           + (f"; lines of {', '.join(lines)} taken out" if a.lines_out else ""))
     if a.grid:
