@@ -49,6 +49,8 @@ def parser():
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="cases in parallel (default 2)")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per diagnosis (default 1800)")
     ap.add_argument("--only", nargs="+", default=None, metavar="ID", help="run only these case ids (e.g. c03)")
+    ap.add_argument("--calibrated-shafts", action="store_true",
+                    help="diagnose with --calibrated-shafts (a shaft sought with the line's fast dynamics calibrated)")
     ap.add_argument("--rescore", action="store_true",
                     help="do not simulate or diagnose: score the finished cases in OUT/cases again")
     return ap
@@ -77,7 +79,7 @@ def _worker(args):
 
 
 def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=1800.0, only=None, log=None,
-        family="own"):
+        family="own", diagnose_args=()):
     """Run one family of the benchmark in ``family_folder(out, family)``; returns (summary, results, meta)."""
     from webline.diagnosis import benchmark as B
     M = _family_module(family)
@@ -95,6 +97,7 @@ def run(n, seed=0, out=Path("out/diagnose-bench"), quick=False, jobs=2, timeout=
     log(f"diagnose-bench [{family}]: {len(cases)} cases ({'quick' if quick else 'full'}), seed {seed}, {jobs} jobs, in {out}")
     # cases run in parallel: each diagnosis then simulates serially (no oversubscription)
     extra = ["--jobs", "1"] if jobs > 1 and _diagnose_has_option("--jobs") else []
+    extra += list(diagnose_args)
     tasks = [(c, out, line_doc, fmu_paths, timeout, extra, family) for c in cases]
     results = []
     if jobs <= 1:
@@ -279,7 +282,8 @@ def main(argv=None):
         if args.rescore:
             families[fam] = rescore(args.out, args.results, fam)
         else:
-            families[fam] = run(n, args.seed, args.out, args.quick, args.jobs, args.timeout, args.only, family=fam)
+            families[fam] = run(n, args.seed, args.out, args.quick, args.jobs, args.timeout, args.only, family=fam,
+                                diagnose_args=["--calibrated-shafts"] if args.calibrated_shafts else [])
     path = args.results or (args.out / "diagnosis_results.json")
     md = write(families, path)
     print(md)

@@ -77,6 +77,9 @@ RANGE_STEPS = 6     # grid steps a claimed shaft's mode range is followed past t
 MAX_HUMPS = 1       # humps tried, strongest first, before the missed bands (each costs a grid of simulations per drive)
 
 
+CALIBRATED_RATIO = 1.3   # rigid line's calibrated misfit over the best shaft's for a shaft candidate
+                         # (:func:`calibrated`; set on seeds 50-56 where no shaft reached 1.06 and the
+                         # four detectable ones 1.37-3.2; docs/diagnose.md)
 LINES_TOP_HZ = 40.0   # the reported sources' harmonics taken out of a residual up to here (bands reach 32 Hz)
 LINES_BLOCK_S = 2.0   # ... block by block of the fit window (each speed level its own amplitudes), this long at least
 
@@ -709,7 +712,8 @@ def _effect(hump, rec, tried, base, chk):
     nxt = tried[1]["misfit"] if len(tried) > 1 else base[0]
     runner = runner_up(tried)
     spec, ft, zeta, form, sets = b["spec"], b["torsional_hz"], b["zeta"], b.get("form"), b.get("sets") or {}
-    what = (f"residual hump near {hump['frequency_hz']:.3g} Hz" if hump.get("kind") != "spectral misfit" else
+    what = (f"residual hump near {hump['frequency_hz']:.3g} Hz"
+            if hump.get("kind") not in ("spectral misfit", "calibrated spectrum") else
             "residual spectrum at {:.3g}-{:.3g} Hz".format(*hump["band_hz"]))
     where = f"{what} on {hump['sensor'].split('.')[0]}"
     return {
@@ -1018,6 +1022,101 @@ def screen(d):
         d.steps.append({"added": b["element"], "kind": "compliance", "sims": sims_b, "check": chk})
         specs = [sp for sp in specs if sp[0] != b["element"]]
         log.info("  claimed: %s", eff["detail"])
+    if getattr(d.opt, "calibrated_shafts", False) and specs and not any(r["claimed"] for r in d.compliance):
+        calibrated(d, noise, specs)
+
+
+def calibrated(d, noise, specs):
+    """After the humps and the missed bands: a shaft whose mode the line's own fast dynamics
+    hide from the fit of the layout as written. On the longest fit run's residual without the
+    reported sources' lines, over :data:`calibrate.BAND_HZ`, the rigid line and a shaft on each
+    drive at each of :data:`calibrate.MODES_HZ` are each fitted after calibrating web EA, the
+    drives' inertias, the load cells' filters, the speed loops' K_ref and a current lag
+    (:func:`calibrate.scan`). The best shaft is a candidate when its calibrated misfit is
+    :data:`CALIBRATED_RATIO` times lower than the rigid line's; it is checked as every shaft is
+    (the refined layout with it, as written, raises no sensor's NRMSE on the fit runs) and
+    claimed or refused, in ``d.compliance`` as a record of kind 'calibrated spectrum'."""
+    from webline.diagnosis import calibrate
+    c = max(d.fit_ctx(), key=lambda c: int(np.sum(c.mask)))
+    sims0 = d.steps[-1]["sims"]
+    P, S0, f = {}, {}, None
+    for s in c.sensors:
+        r = c.meas[s] - sims0[c.name].columns[s]
+        f, p = ripple.welch(line_free(d, c, r), c.fs)
+        P[s] = ripple.fine(p, f)
+        S0[s] = noise[c.name][s]["psd_N2_per_hz"]
+    speed = float(np.mean(np.asarray(c.speed, float)[c.mask]))
+    sets = dict(d.refined_doc.get("set") or {})
+    log.info("  calibrated ripple spectrum of %s (%g-%g Hz): the rigid line and shafts at %s Hz on %s",
+             c.name, *calibrate.BAND_HZ, "/".join(f"{m:g}" for m in calibrate.MODES_HZ), ", ".join(s[0] for s in specs))
+    res = calibrate.scan(d.model, c.run, sets, specs, list(c.sensors), speed, P, S0, f,
+                         progress=lambda t: log.debug("    %s", t))
+    band = list(calibrate.BAND_HZ)
+    b0 = res["shafts"][0] if res["shafts"] else None
+    sensor = max(c.sensors, key=lambda s: float(np.sum(P[s][(f >= band[0]) & (f <= band[1])]) / S0[s]))
+    hump = {"kind": "calibrated spectrum", "run": c.name, "sensor": sensor,
+            "frequency_hz": b0["torsional_hz"] if b0 else math.sqrt(band[0] * band[1]), "band_hz": band,
+            "share_of_residual": None}
+    rec = {"hump": hump, "rigid": {"misfit": res["rigid"]["misfit"], "explains": None,
+                                   "form": res["rigid"]["form"] or "as modelled", "forms": None,
+                                   "calibrated": res["rigid"]["scales"]},
+           "tried": [{"element": r["element"], "torsional_hz": r["torsional_hz"], "zeta": ZETA,
+                      "misfit": r["misfit"], "explained": None, "own_share": None, "form": r["form"]}
+                     for r in res["shafts"]],
+           "claimed": None, "calibrated": {"ratio": res["ratio"], "ratio_needed": CALIBRATED_RATIO,
+                                           "forms": res["forms"]}}
+    d.compliance.append(rec)
+    if b0 is None or res["ratio"] is None or res["ratio"] < CALIBRATED_RATIO:
+        rec["why"] = (f"calibrated, the best shaft ({b0['element']}, {b0['torsional_hz']:.3g} Hz) fits "
+                      f"{band[0]:g}-{band[1]:g} Hz {res['ratio']:.3g} x better than the rigid line (needs "
+                      f"{CALIBRATED_RATIO:g} x)") if b0 else "no shaft could be calibrated"
+        log.info("  no shaft claimed: %s", rec["why"])
+        return
+    spec = next(sp for sp in specs if sp[0] == b0["element"])
+    ft = b0["torsional_hz"]
+    # the ripple levels and what the shaft explains, at its calibration
+    cal = calibrate.Calibration(d.model, c.run, sets, [sp[0] for sp in specs], list(c.sensors), speed,
+                                shaft=(spec, ft), form=b0["form"])
+    G = calibrate.responses(d.model, c.run, cal.doc(np.log([b0["scales"][n] for n in cal.names])),
+                            [sp[0] for sp in specs], list(c.sensors), f, speed)
+    _, levels, (Gx, R) = calibrate.misfit(P, G, S0, f, band)
+    m = (f >= band[0]) & (f <= band[1])
+    floor = sum(levels[k] * Gx[k][sensor] for k in Gx if k.startswith("_"))
+    rip, ex = R[sensor] - floor, np.maximum(P[sensor] - floor, 0.0)
+    explained = float(np.sum(np.minimum(rip[m], ex[m])) / np.sum(ex[m])) if np.sum(ex[m]) > 0 else 0.0
+    tot = float(np.sum(rip[m]))
+    own = float(np.sum(levels[spec[0]] * Gx[spec[0]][sensor][m])) / tot if tot > 0 else 0.0
+    doc = others._drive_doc(copy.deepcopy(d.refined_doc), spec, ft, 0.0, zeta=ZETA)
+    p = {"element": spec[0], "torsional_hz": ft, "zeta": ZETA, "misfit": b0["misfit"], "explained": explained,
+         "levels": {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")},
+         "own_share": own, "spec": spec, "doc": doc, "form": None, "sets": {}}
+    rec["tried"][0].update(explained=explained, own_share=own)
+    base = (res["rigid"]["misfit"], None, {})
+    sims_b = d._simulate_all(doc, f"refined +{spec[0]} compliance {ft:.3g} Hz (calibrated spectrum)")
+    chk = _nrmse_check(d, sims0, sims_b, base, p)
+    log.info("  check of %s's shaft at %.3g Hz (calibrated spectrum, ratio %.3g): %s",
+             spec[0], ft, res["ratio"], chk["reason"])
+    if not chk["accepted"]:
+        d._reject(spec[0], "compliance", "shaft check", None, reason=chk["reason"],
+                  nrmse_before=chk["nrmse_before"], nrmse_after=chk["nrmse_after"], torsional_hz=ft)
+        rec["why"] = chk["reason"]
+        worst = max(chk["rise_t"], key=lambda s: chk["nrmse_after"][s] / chk["nrmse_before"][s])
+        rec["refused"] = {"element": spec[0], "torsional_hz": ft, "explained": explained, "misfit": b0["misfit"],
+                          "rigid_misfit": base[0], "sensor": worst,
+                          "rise": chk["nrmse_after"][worst] / chk["nrmse_before"][worst] - 1.0,
+                          "rise_t": chk["rise_t"][worst]}
+        if _within_noise(rec["refused"]):
+            rec["refused"]["holdout"] = holdout_view(d, p)
+        return
+    eff = _effect(hump, rec, [p] + [dict(t, spec=None) for t in res["shafts"][1:]], base, chk)
+    eff["parameters"]["torsional_frequency"]["range"] = [ft, ft]
+    eff["detail"] += (f"; calibrated, it fits {band[0]:g}-{band[1]:g} Hz {res['ratio']:.3g} x better than the "
+                      f"rigid line")
+    rec["claimed"] = spec[0]
+    d.other = list(getattr(d, "other", []) or []) + [eff]
+    d.refined_doc = doc
+    d.steps.append({"added": spec[0], "kind": "compliance", "sims": sims_b, "check": chk})
+    log.info("  claimed: %s", eff["detail"])
 
 
 def refused(records):

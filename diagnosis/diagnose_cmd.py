@@ -45,6 +45,10 @@ def parser():
     ap.add_argument("--no-ripple", action="store_true",
                     help="do not fit the drives' torque ripple to the residual's humps (each hump stays "
                          "an unexplained resonance)")
+    ap.add_argument("--calibrated-shafts", action="store_true",
+                    help="no shaft claimed otherwise: seek one with the line's fast dynamics calibrated to the "
+                         "ripple spectrum (minutes more; docs/diagnose.md, 'The ripple spectrum with the line "
+                         "calibrated')")
     ap.add_argument("--no-transfer", action="store_true",
                     help="keep every estimated order in the refined layout, also those whose held-out "
                          "prediction does not carry over lines within the data sheet's tolerances")
@@ -72,7 +76,7 @@ def main(argv=None):
                   jobs=args.jobs if args.jobs is not None else min(2, os.cpu_count() or 1),
                   time_column=args.time, time_unit=args.time_unit, engine=args.engine,
                   confirm=not args.no_confirm, gains=args.gains, transfer=not args.no_transfer,
-                  ripple=not args.no_ripple)
+                  ripple=not args.no_ripple, calibrated_shafts=args.calibrated_shafts)
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:
