@@ -90,3 +90,26 @@ def test_calibration_at_zero_is_the_layout_with_the_nominal_lag(line):
     cal = calibrate.Calibration(model, run, {}, drives, SENSORS, SPEED, shaft=(specs[1], 9.0))
     doc = cal.doc(np.zeros(len(cal.names)))
     assert "drive" in calibrate.resolved(model, doc["set"])["drives"]["speed_loops"][specs[1][0]]
+
+
+def _res(rigid, best, element="sw_leader"):
+    return {"band_hz": [4.0, 24.0], "rigid": {"misfit": rigid},
+            "shafts": [{"element": element, "torsional_hz": 7.0, "misfit": best}], "ratio": rigid / best}
+
+
+@pytest.mark.parametrize("rigid, best, claimed", [
+    (0.0908, 0.0706, True),    # seed-50 c09, the leader's 7.6 Hz shaft: 1.285 x, 1.3 x the floor
+    (0.1241, 0.0522, True),    # seed-56 c09, the unwind's 13.3 Hz shaft
+    (0.0130, 0.0113, False),   # seed-57 c15, noise only: 1.15 x, 0.11 x the floor
+    (0.0210, 0.0186, False),   # seed-57 c03, noise only: 1.13 x
+    (0.0245, 0.0209, False),   # seed-56 c21, the leader's 4.36 Hz shaft below the modes tried: 1.17 x
+    (5.0468, 4.7540, False),   # a residual the model misses everywhere: a large drop, 1.06 x
+])
+def test_a_calibrated_shaft_needs_both_the_ratio_and_a_drop_beyond_noise(rigid, best, claimed):
+    """The rule of :func:`compliance.calibrated_refusal` on the calibrated misfits of kept
+    benchmark cases, with the misfit floor of a 50 s window (24 Welch segments)."""
+    floor = 2.0 / (2 * 3 * 0.9 * 24)
+    why = compliance.calibrated_refusal(_res(rigid, best), floor)
+    assert (why is None) == claimed, why
+    if why:
+        assert "needs 1.2 x" in why and f"needs {compliance.CALIBRATED_GAIN_X:g} x" in why
