@@ -98,7 +98,7 @@ def _res(rigid, best, element="sw_leader"):
 
 
 @pytest.mark.parametrize("rigid, best, claimed", [
-    (0.0908, 0.0706, True),    # seed-50 c09, the leader's 7.6 Hz shaft: 1.285 x, 1.3 x the floor
+    (0.0908, 0.0706, True),    # seed-50 c09, the leader's 7.6 Hz shaft: 1.285 x, 1.3 x this floor
     (0.1241, 0.0522, True),    # seed-56 c09, the unwind's 13.3 Hz shaft
     (0.0130, 0.0113, False),   # seed-57 c15, noise only: 1.15 x, 0.11 x the floor
     (0.0210, 0.0186, False),   # seed-57 c03, noise only: 1.13 x
@@ -107,7 +107,8 @@ def _res(rigid, best, element="sw_leader"):
 ])
 def test_a_calibrated_shaft_needs_both_the_ratio_and_a_drop_beyond_noise(rigid, best, claimed):
     """The rule of :func:`compliance.calibrated_refusal` on the calibrated misfits of kept
-    benchmark cases, with the misfit floor of a 50 s window (24 Welch segments)."""
+    benchmark cases (bench/shaft_lin_probe.py), with the misfit floor of a 50 s window (24
+    Welch segments; a ramped run's steady windows are shorter and their floor higher)."""
     floor = 2.0 / (2 * 3 * 0.9 * 24)
     why = compliance.calibrated_refusal(_res(rigid, best), floor)
     assert (why is None) == claimed, why
