@@ -1128,7 +1128,7 @@ def calibrated_refusal(res, floor):
     noise leaves (``floor``, :func:`misfit_floor`). The ratio alone let noise-only records
     come near (seed-57 c15: 0.0130 -> 0.0113, 1.15 x, a drop of 0.11 x its floor; no no-shaft case
     of seeds 56-57 dropped by more than 0.16 x), where the hidden shafts found drop by 0.93 x
-    (seed-50 c09, 0.0908 -> 0.0706 on a ramped run's shorter window) to 3.3 x (seed-56 c09)."""
+    (seed-50 c09, 0.0908 -> 0.0706 on a ramped run's shorter window) to 6.8 x (seed-57 c09)."""
     b = res["shafts"][0] if res["shafts"] else None
     if b is None or res["ratio"] is None:
         return "no shaft could be calibrated"
