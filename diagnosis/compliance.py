@@ -1024,7 +1024,7 @@ def screen(d):
         specs = [sp for sp in specs if sp[0] != b["element"]]
         log.info("  claimed: %s", eff["detail"])
     if getattr(d.opt, "calibrated_shafts", False) and specs and not any(r["claimed"] for r in d.compliance):
-        calibrated(d, noise, specs)
+        calibrated_or_note(d, noise, specs)
 
 
 def calibrated(d, noise, specs):
@@ -1119,6 +1119,18 @@ def calibrated(d, noise, specs):
     d.refined_doc = doc
     d.steps.append({"added": spec[0], "kind": "compliance", "sims": sims_b, "check": chk})
     log.info("  claimed: %s", eff["detail"])
+
+
+def calibrated_or_note(d, noise, specs):
+    """:func:`calibrated`, and where it fails (a layout the linearisation cannot hold, a
+    simulation that fails), a note in the report instead of the diagnosis stopping: the
+    stage is an extra search, and what the screens before it found stands."""
+    try:
+        calibrated(d, noise, specs)
+    except Exception as exc:  # noqa: BLE001 - any failure of the extra stage is reported, not raised
+        msg = (str(exc).splitlines() or [type(exc).__name__])[0][:300]
+        log.warning("  the calibrated shaft screen failed: %s", msg)
+        d.notes.append(f"the calibrated shaft screen (--calibrated-shafts) failed and claimed nothing: {msg}")
 
 
 def calibrated_refusal(res, floor):

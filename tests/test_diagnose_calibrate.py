@@ -114,3 +114,13 @@ def test_a_calibrated_shaft_needs_both_the_ratio_and_a_drop_beyond_noise(rigid, 
     assert (why is None) == claimed, why
     if why:
         assert "needs 1.2 x" in why and f"needs {compliance.CALIBRATED_GAIN_X:g} x" in why
+
+
+def test_a_failing_calibrated_stage_is_a_note_not_a_stop(monkeypatch):
+    def boom(d, noise, specs):
+        raise RuntimeError("the linearisation cannot hold this layout\nsecond line")
+    monkeypatch.setattr(compliance, "calibrated", boom)
+    d = SimpleNamespace(notes=[])
+    compliance.calibrated_or_note(d, {}, [("sw_leader", 0.1, ("inertia", 0.1))])
+    assert d.notes == ["the calibrated shaft screen (--calibrated-shafts) failed and claimed nothing: "
+                       "the linearisation cannot hold this layout"]
