@@ -1033,10 +1033,11 @@ def calibrated(d, noise, specs):
     reported sources' lines, over :data:`calibrate.BAND_HZ`, the rigid line and a shaft on each
     drive at each of :data:`calibrate.MODES_HZ` are each fitted after calibrating web EA, the
     drives' inertias, the load cells' filters, the speed loops' K_ref and a current lag
-    (:func:`calibrate.scan`). The best shaft is a candidate when its calibrated misfit is
-    :data:`CALIBRATED_RATIO` times lower than the rigid line's; it is checked as every shaft is
-    (the refined layout with it, as written, raises no sensor's NRMSE on the fit runs) and
-    claimed or refused, in ``d.compliance`` as a record of kind 'calibrated spectrum'."""
+    (:func:`calibrate.scan`). The best shaft is a candidate when :func:`calibrated_refusal`
+    finds nothing against it; it is checked as every shaft is (the refined layout with it, as
+    written, at the calibrated mode, raises no sensor's NRMSE on the fit runs) and claimed or
+    refused, in ``d.compliance`` as a record of kind 'calibrated spectrum'. Unlike the bands'
+    shafts, a refused one is not tried again with the periodic sources re-estimated."""
     from webline.diagnosis import calibrate
     c = max(d.fit_ctx(), key=lambda c: int(np.sum(c.mask)))
     sims0 = d.steps[-1]["sims"]
@@ -1201,6 +1202,7 @@ def label(findings, records):
                              f"{h['sensor'].split('.')[0]}, rung by the drive's torque ripple: claimed as an effect "
                              f"({100 * h['share_of_residual']:.0f} % of the refined residual, run {h['run']})")
             elif not rec.get("claimed") and rec["rigid"]["form"] != "as modelled" and hp["run"] == h["run"] \
+                    and hp.get("kind") != "calibrated spectrum" \
                     and "rigid_form" not in h and abs(hp["frequency_hz"] - h["frequency_hz"]) <= 0.15 * hp["frequency_hz"]:
                 # once per hump: the humps near one frequency on two sensors each match both records
                 # (seed-45 c21: 4 and 4.25 Hz, the sentence twice in the verdict)

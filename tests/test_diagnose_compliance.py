@@ -51,6 +51,11 @@ def test_label_says_which_hump_a_claimed_shaft_reproduces():
     rec3 = dict(rec2, hump=dict(rec2["hump"], sensor="lc9.T", frequency_hz=4.5))
     out = compliance.label([dict(h)], [rec2, rec3])
     assert out[0]["text"].count("fits its spectrum") == 1, out[0]["text"]
+    # the calibrated stage's record (its 'form' a feed-forward the calibration chose) says nothing of a hump
+    rec4 = dict(rec2, hump=dict(rec2["hump"], kind="calibrated spectrum", band_hz=[4.0, 24.0]),
+                rigid={"form": "reference"})
+    out = compliance.label([dict(h)], [rec4])
+    assert out[0]["text"] == h["text"] and "rigid_form" not in out[0]
 
 
 def test_a_claimed_shaft_names_the_next_drive_when_its_shaft_fits_the_band_nearly_as_well():
