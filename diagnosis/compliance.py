@@ -1023,7 +1023,8 @@ def screen(d):
         d.steps.append({"added": b["element"], "kind": "compliance", "sims": sims_b, "check": chk})
         specs = [sp for sp in specs if sp[0] != b["element"]]
         log.info("  claimed: %s", eff["detail"])
-    if getattr(d.opt, "calibrated_shafts", False) and specs and not any(r["claimed"] for r in d.compliance):
+    if getattr(getattr(d, "opt", None), "calibrated_shafts", False) and specs \
+            and not any(r["claimed"] for r in d.compliance):
         calibrated_or_note(d, noise, specs)
 
 
