@@ -40,7 +40,7 @@ import numpy as np
 import yaml
 
 from webline.diagnosis import benchmark as B
-from webline.diagnosis import candidates, compliance, estimate, layout_edit, others, ripple, tolerances
+from webline.diagnosis import calibrate, candidates, estimate, layout_edit, others, ripple, tolerances
 from webline.diagnosis import runs as R
 from webline.diagnosis.line_model import LineModel
 from webline.orchestrator import units
@@ -80,7 +80,6 @@ class Probe:
         self.model = LineModel(str(case / "blind" / "line.yaml"))
         self.run_sheet = R.load_run(str(case / "blind" / f"{run_name}.yaml"))
         self.case, self.run_name = case, run_name
-        self.run = self.run_sheet
         self.conditions("report")
         t = np.asarray(self.run.t)
         self.fs = 1.0 / float(np.median(np.diff(t)))
@@ -186,10 +185,8 @@ class Probe:
 
 def misfit(P, G, S0, f, band):
     """:func:`diagnosis.compliance.spectral_fit`'s misfit of the responses ``G`` to ``P``
-    over ``band``: every drive's level and the floors free."""
-    lo, hi = band
-    _, fit = ripple.fit_levels(P, compliance.with_floors(G, S0, f, lo), {s: 0.0 for s in P}, f, band=band)
-    return compliance.log_misfit(P, fit, (f >= lo) & (f <= hi))[0]
+    over ``band``: every drive's level and the floors free (:func:`diagnosis.calibrate.misfit`)."""
+    return calibrate.misfit(P, G, S0, f, band)[0]
 
 def layouts(probe, case, element, which):
     """{name: (set entries on the blind layout, the element's total inertia for the scan)}."""

@@ -17,6 +17,8 @@ The comparison is the ratio of the calibrated misfits, rigid line over the best 
 (:func:`scan`). Measured on the kept cases of seeds 50-57 (docs/diagnose.md, "The ripple
 spectrum with the line calibrated").
 """
+import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -59,8 +61,6 @@ def responses(model, run, doc, drives, sensors, f, speed):
 def _at_speed(run, speed):
     """``run`` at the steady line speed ``speed`` (m/s): a ramped run is linearised at its
     fit window's mean speed."""
-    import copy
-    import dataclasses
     ov = {**dict(run.overrides), "experiment.line_speed": f"{speed:.12g} m/s"}
     if dataclasses.is_dataclass(run):
         return dataclasses.replace(run, overrides=ov)

@@ -157,19 +157,35 @@ def spectral_fit(d, noise, doc, sims, hump, G=None, lines_out=False, levels=None
     f = freqs[c.name]
     band = band_of(hump, c.fs)
     m = (f >= band[0]) & (f <= band[1])
-    P, S0 = {}, {}
-    for s in c.sensors:
-        r = c.meas[s] - sims[c.name].columns[s]
-        _, p = ripple.welch(line_free(d, c, r) if lines_out else r[c.mask], c.fs)
-        P[s] = ripple.fine(p, f)
-        S0[s] = noise[c.name][s]["psd_N2_per_hz"]
+    P, S0, _ = residual_spectra(d, noise, c, sims, lines_out)
     Gx = with_floors(G[c.name], S0, f, band[0])
     if levels is None:
         levels, R = ripple.fit_levels(P, Gx, {s: 0.0 for s in P}, f, band=band)
     else:
         levels, R = _floors_under(P, Gx, {e: levels.get(e, 0.0) ** 2 for e in G[c.name]}, f, band)
     mis, per = log_misfit(P, R, m)
-    s = hump["sensor"]
+    x, shares = ripple_shares(P, Gx, R, levels, hump["sensor"], m)
+    return (mis, x, {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")}, shares,
+            {s: float(np.mean(v)) for s, v in per.items()})
+
+
+def residual_spectra(d, noise, c, sims, lines_out):
+    """({sensor: fine PSD}, {sensor: the sensor's white noise PSD}, f): the residual of run
+    ``c`` against the simulations ``sims`` (by run) on its fit window, without the reported
+    sources' lines when ``lines_out`` (:func:`line_free`)."""
+    P, S0, f = {}, {}, None
+    for s in c.sensors:
+        r = c.meas[s] - sims[c.name].columns[s]
+        f, p = ripple.welch(line_free(d, c, r) if lines_out else r[c.mask], c.fs)
+        P[s] = ripple.fine(p, f)
+        S0[s] = noise[c.name][s]["psd_N2_per_hz"]
+    return P, S0, f
+
+
+def ripple_shares(P, Gx, R, levels, s, m):
+    """(share of sensor ``s``'s excess over the fitted floors that the ripple part of the fit
+    ``R`` reproduces over the bins ``m``, None without excess; {drive: its share of that
+    ripple part}), for a fit of :func:`with_floors` responses ``Gx`` at ``levels``."""
     floor = sum(levels[k] * Gx[k][s] for k in Gx if k.startswith("_"))
     rip = R[s] - floor
     ex = np.maximum(P[s][m] - floor[m], 0.0)
@@ -177,8 +193,7 @@ def spectral_fit(d, noise, doc, sims, hump, G=None, lines_out=False, levels=None
     tot = float(np.sum(rip[m]))
     shares = {e: float(np.sum(levels[e] * Gx[e][s][m])) / tot if tot > 0 else 0.0
               for e in Gx if not e.startswith("_")}
-    return (mis, x, {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")}, shares,
-            {s: float(np.mean(v)) for s, v in per.items()})
+    return x, shares
 
 
 def with_floors(G, S0, f, lo):
@@ -1042,12 +1057,7 @@ def calibrated(d, noise, specs):
     from webline.diagnosis import calibrate
     c = max(d.fit_ctx(), key=lambda c: int(np.sum(c.mask)))
     sims0 = d.steps[-1]["sims"]
-    P, S0, f = {}, {}, None
-    for s in c.sensors:
-        r = c.meas[s] - sims0[c.name].columns[s]
-        f, p = ripple.welch(line_free(d, c, r), c.fs)
-        P[s] = ripple.fine(p, f)
-        S0[s] = noise[c.name][s]["psd_N2_per_hz"]
+    P, S0, f = residual_spectra(d, noise, c, sims0, lines_out=True)
     speed = float(np.mean(np.asarray(c.speed, float)[c.mask]))
     sets = dict(d.refined_doc.get("set") or {})
     log.info("  calibrated ripple spectrum of %s (%g-%g Hz): the rigid line and shafts at %s Hz on %s",
@@ -1084,12 +1094,8 @@ def calibrated(d, noise, specs):
     G = calibrate.responses(d.model, c.run, cal.doc(np.log([b0["scales"][n] for n in cal.names])),
                             [sp[0] for sp in specs], list(c.sensors), f, speed)
     _, levels, (Gx, R) = calibrate.misfit(P, G, S0, f, band)
-    m = (f >= band[0]) & (f <= band[1])
-    floor = sum(levels[k] * Gx[k][sensor] for k in Gx if k.startswith("_"))
-    rip, ex = R[sensor] - floor, np.maximum(P[sensor] - floor, 0.0)
-    explained = float(np.sum(np.minimum(rip[m], ex[m])) / np.sum(ex[m])) if np.sum(ex[m]) > 0 else 0.0
-    tot = float(np.sum(rip[m]))
-    own = float(np.sum(levels[spec[0]] * Gx[spec[0]][sensor][m])) / tot if tot > 0 else 0.0
+    explained, shares = ripple_shares(P, Gx, R, levels, sensor, (f >= band[0]) & (f <= band[1]))
+    explained, own = explained or 0.0, shares[spec[0]]
     doc = others._drive_doc(copy.deepcopy(d.refined_doc), spec, ft, 0.0, zeta=ZETA)
     p = {"element": spec[0], "torsional_hz": ft, "zeta": ZETA, "misfit": b0["misfit"], "explained": explained,
          "levels": {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")},

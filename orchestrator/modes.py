@@ -58,8 +58,8 @@ import numpy as np
 # Relative central-difference step: the line's equations are low-order polynomials in the
 # states (products T v, T/L), so truncation error is tiny; 1e-6 keeps round-off at
 # ~eps/h ~ 1e-10 of a term.
-TRANSFER_CHUNK = 256   # frequencies per batched solve in Linearisation.transfer (memory ~ chunk n^2)
 REL_STEP = 1.0e-6
+TRANSFER_CHUNK = 256   # frequencies per batched solve in Linearisation.transfer (memory ~ chunk n^2)
 ROTATING_MODELS = ("IdleRoller", "DrivenRoller", "UnwindRoll", "RewindRoll")
 DRIVEN_MODELS = ("DrivenRoller", "UnwindRoll", "RewindRoll")
 
