@@ -84,6 +84,10 @@ def main(argv=None):
     for r in sorted(res["shafts"], key=lambda r: r["element"]):
         print(f"ratio {r['element']}: rigid {rigid:.4f} / {r['misfit']:.4f} at {r['torsional_hz']:.2f} Hz "
               f"({r['form'] or 'as written'}) = {rigid / r['misfit']:.3f}")
+    if res.get("refined"):
+        r = res["refined"]["row"]
+        print(f"refined: {r['element']} at {r['torsional_hz']:.3g} Hz, misfit {r['misfit']:.4f}; tried "
+              + ", ".join(f"{t['torsional_hz']:.3g} Hz {t['misfit']:.4f}" for t in res["refined"]["tried"]))
     if a.json:
         json.dump({"case": str(a.case), "run": a.run, **res}, open(a.json, "w"), indent=1)
 

@@ -31,6 +31,11 @@ from webline.orchestrator.layout_source import load_located, plain
 BAND_HZ = (4.0, 24.0)          # above the line's slow tension modes, below the load cells' roll-off
 MODES_HZ = (5.0, 7.0, 10.0, 14.0, 20.0)   # the shafts' torsional modes tried on each drive
 MAXFEV = 60                    # Nelder-Mead evaluations per candidate and form
+#: the best shaft's mode refined between its grid neighbours: first at 2^(+-1/4) of the grid
+#: mode (the grid's half step), then at 2^(+-1/8) of the better of the three, each fit warm
+#: from the best one's calibration with :data:`REFINE_MAXFEV` steps
+REFINE_STEPS = (2.0 ** 0.25, 2.0 ** 0.125)
+REFINE_MAXFEV = 30
 LAG0_S = 3.0e-3                # the current-loop lag every drive is given, scaled by the fit
 #: log bounds of the scale factors: web EA within a data sheet's +-30 %, the rest +-50 %, the
 #: lag 0.3-6 ms
@@ -117,8 +122,9 @@ class Calibration:
             doc = others._drive_doc(doc, (el, J * k, (key, own * k)), ft, 0.0)
         return doc
 
-    def fit(self, P, S0, f, band=BAND_HZ, maxfev=MAXFEV):
-        """(misfit as written, calibrated misfit, {name: scale factor}, evaluations)."""
+    def fit(self, P, S0, f, band=BAND_HZ, maxfev=MAXFEV, start=None):
+        """(misfit as written, calibrated misfit, {name: scale factor}, evaluations);
+        ``start``: {name: scale factor} the search starts from (default: the layout's)."""
         def cost(x):
             try:
                 G = responses(self.model, self.run, self.doc(x), self.drives, self.sensors, f, self.speed)
@@ -126,8 +132,8 @@ class Calibration:
                 return 1e3
             return misfit(P, G, S0, f, band)[0]
 
-        x0 = np.zeros(len(self.names))
-        c0 = cost(x0)
+        c0 = cost(np.zeros(len(self.names)))
+        x0 = np.zeros(len(self.names)) if start is None else np.log([start[n] for n in self.names])
         simplex = np.vstack([x0] + [x0 + 0.15 * np.eye(len(x0))[i] for i in range(len(x0))])
         r = optimize.minimize(cost, x0, method="Nelder-Mead",
                               options={"maxfev": maxfev, "xatol": 0.01, "fatol": 1e-4, "initial_simplex": simplex})
@@ -146,12 +152,15 @@ def _forms(model, sets, drives):
 
 
 def scan(model, run, sets, specs, sensors, speed, P, S0, f, band=BAND_HZ, modes_hz=MODES_HZ,
-         maxfev=MAXFEV, forms=None, progress=None):
+         maxfev=MAXFEV, forms=None, progress=None, refine_best=True):
     """The rigid line and a shaft on each drive of ``specs`` (``others.drive_candidates``'
     (element, J, (key, own inertia))) at each of ``modes_hz``, each calibrated in each form.
     Returns {"rigid": row, "shafts": [rows by drive, best first], "ratio": rigid misfit
-    over the best shaft's}; a row is {element, torsional_hz, form, misfit, misfit_as_written,
-    scales}. ``forms``: the feed-forward forms tried (default :func:`_forms`). ``progress(text)``:
+    over the best shaft's, "refined": {"row", "tried"} (:func:`refine`, the best shaft's mode;
+    None without shafts or with ``refine_best`` false)}; a row is {element, torsional_hz, form,
+    misfit, misfit_as_written, scales}. The ratio compares the grid's fits only, each
+    started from the layout: the refinement's warm starts would favour the shaft.
+    ``forms``: the feed-forward forms tried (default :func:`_forms`). ``progress(text)``:
     told after each fit."""
     drives = [sp[0] for sp in specs]
     forms = list(forms) if forms is not None else _forms(model, sets, drives)
@@ -159,22 +168,54 @@ def scan(model, run, sets, specs, sensors, speed, P, S0, f, band=BAND_HZ, modes_
     def best_of(shaft):
         row = None
         for form in forms:
-            cal = Calibration(model, run, sets, drives, sensors, speed, shaft=shaft, form=form)
-            c0, c1, sc, _ = cal.fit(P, S0, f, band, maxfev)
-            if row is None or c1 < row["misfit"]:
-                row = {"element": shaft[0][0] if shaft else None, "torsional_hz": shaft[1] if shaft else None,
-                       "form": form, "misfit": c1, "misfit_as_written": c0, "scales": sc}
-            if progress:
-                progress(f"{'rigid line' if not shaft else f'{shaft[0][0]} shaft {shaft[1]:.3g} Hz'}"
-                         f" ({form or 'as written'}): {c0:.4g} -> {c1:.4g}")
+            r = _fit_row(model, run, sets, drives, sensors, speed, P, S0, f, band, maxfev, shaft, form, None, progress)
+            if row is None or r["misfit"] < row["misfit"]:
+                row = r
         return row
 
     rigid = best_of(None)
-    shafts = []
+    shafts, by_drive = [], {}
     for spec in specs:
-        rows = [best_of((spec, ft)) for ft in modes_hz]
-        shafts.append(min(rows, key=lambda r: r["misfit"]))
+        by_drive[spec[0]] = [best_of((spec, ft)) for ft in modes_hz]
+        shafts.append(min(by_drive[spec[0]], key=lambda r: r["misfit"]))
     shafts.sort(key=lambda r: r["misfit"])
     ratio = rigid["misfit"] / shafts[0]["misfit"] if shafts and shafts[0]["misfit"] > 0 else None
+    refined = None
+    if shafts and refine_best:
+        b = shafts[0]
+        spec = next(sp for sp in specs if sp[0] == b["element"])
+        row, tried = refine(model, run, sets, spec, b, drives, sensors, speed, P, S0, f, band, progress=progress)
+        refined = {"row": row, "tried": sorted([r for r in by_drive[b["element"]] if r is not b] + tried,
+                                               key=lambda r: r["torsional_hz"])}
     return {"band_hz": list(band), "forms": [f or "as written" for f in forms], "rigid": rigid,
-            "shafts": shafts, "ratio": ratio}
+            "shafts": shafts, "ratio": ratio, "refined": refined}
+
+
+def _fit_row(model, run, sets, drives, sensors, speed, P, S0, f, band, maxfev, shaft, form, start, progress):
+    """One calibrated fit as a row of :func:`scan`."""
+    cal = Calibration(model, run, sets, drives, sensors, speed, shaft=shaft, form=form)
+    c0, c1, sc, _ = cal.fit(P, S0, f, band, maxfev, start=start)
+    if progress:
+        progress(f"{'rigid line' if not shaft else f'{shaft[0][0]} shaft {shaft[1]:.3g} Hz'}"
+                 f" ({form or 'as written'}): {c0:.4g} -> {c1:.4g}")
+    return {"element": shaft[0][0] if shaft else None, "torsional_hz": shaft[1] if shaft else None,
+            "form": form, "misfit": c1, "misfit_as_written": c0, "scales": sc}
+
+
+def refine(model, run, sets, spec, row, drives, sensors, speed, P, S0, f, band=BAND_HZ, steps=REFINE_STEPS,
+           maxfev=REFINE_MAXFEV, progress=None):
+    """The mode of the shaft ``row`` (on ``spec``'s drive, in its form) refined between the
+    grid's neighbours: at ``row``'s mode times and over each of ``steps`` in turn, around the
+    best so far, each fit started from the calibration of the one it steps from. Returns
+    (best row, the rows tried). Seed-50 c09's leader shaft (7.6 Hz) was claimed at the grid's
+    5 Hz before (docs/diagnose.md, "The calibrated shaft screen")."""
+    best, tried = row, []
+    for k in steps:
+        centre = best
+        for m in (centre["torsional_hz"] / k, centre["torsional_hz"] * k):
+            r = _fit_row(model, run, sets, drives, sensors, speed, P, S0, f, band, maxfev, (spec, m),
+                         centre["form"], centre["scales"], progress)
+            tried.append(r)
+            if r["misfit"] < best["misfit"]:
+                best = r
+    return best, [row] + tried

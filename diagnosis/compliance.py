@@ -615,6 +615,26 @@ def line_placed(d, noise, hump, base, b, memo=None):
     return None, rows
 
 
+def checked_shaft(d, p, base, label=""):
+    """(shaft, its simulations on the fit runs, :func:`_nrmse_check`) of the shaft ``p`` (its
+    layout ``p["doc"]``): if the check refuses it beside periodic sources, again with their
+    run-outs re-estimated (:func:`regress.reestimate`; the shaft then carries ``new_X`` and
+    the re-estimated layout), kept when that passes or lowers the worst NRMSE. The sources'
+    estimates were made on rigid drives; a shaft on a drive their lines pass changes their
+    transfer (independent seed-9 c24: the S-wrap leader's 10.6 Hz shaft raised lc19 by 8.1 %
+    with idler_r1's run-out as estimated)."""
+    name = f"{p['element']} shaft {p['torsional_hz']:.3g} Hz{label}"
+    sims = d._simulate_all(p["doc"], f"refined +{p['element']} compliance {p['torsional_hz']:.3g} Hz{label}")
+    chk = _nrmse_check(d, d.steps[-1]["sims"], sims, base, p)
+    if not chk["accepted"] and d.final_effects:
+        got = regress.reestimate(d, p["doc"], name)
+        if got is not None:
+            chk2 = _nrmse_check(d, d.steps[-1]["sims"], got[1], base, p)
+            if chk2["accepted"] or max(chk2["nrmse_after"].values()) < max(chk["nrmse_after"].values()):
+                p, sims, chk = dict(p, doc=got[0], new_X=got[2]), got[1], chk2
+    return p, sims, chk
+
+
 def _nrmse_check(d, before, after, base, b):
     """The shaft's check: the refined layout with it (``after``) against without
     (``before``) on the fit runs, no sensor's NRMSE up by more than
@@ -979,17 +999,7 @@ def screen(d):
         # only to a grid step or so)
         ok = [p for p in pts if passes_spectral_rule(p, base)]
         for p in ok[:CHECK_TRIES] or [b]:
-            sims_b = d._simulate_all(p["doc"], f"refined +{p['element']} compliance {p['torsional_hz']:.3g} Hz")
-            chk = _nrmse_check(d, d.steps[-1]["sims"], sims_b, base, p)
-            if not chk["accepted"] and d.final_effects:
-                # the periodic sources' estimates were made on rigid drives; a shaft on a drive
-                # their lines pass changes their transfer (independent seed-9 c24: the S-wrap
-                # leader's 10.6 Hz shaft raised lc19 by 8.1 % with idler_r1's run-out as estimated)
-                got = regress.reestimate(d, p["doc"], f"{p['element']} shaft {p['torsional_hz']:.3g} Hz")
-                if got is not None:
-                    chk2 = _nrmse_check(d, d.steps[-1]["sims"], got[1], base, p)
-                    if chk2["accepted"] or max(chk2["nrmse_after"].values()) < max(chk["nrmse_after"].values()):
-                        p, sims_b, chk = dict(p, doc=got[0], new_X=got[2]), got[1], chk2
+            p, sims_b, chk = checked_shaft(d, p, base)
             log.info("  check of %s's shaft at %.3g Hz (%s%s): %s", p["element"], p["torsional_hz"],
                      f"form {p['form']}" if p.get("form") else "the layout's form",
                      ", periodic effects re-estimated" if p.get("new_X") is not None else "", chk["reason"])
@@ -1052,8 +1062,10 @@ def calibrated(d, noise, specs):
     (:func:`calibrate.scan`). The best shaft is a candidate when :func:`calibrated_refusal`
     finds nothing against it; it is checked as every shaft is (the refined layout with it, as
     written, at the calibrated mode, raises no sensor's NRMSE on the fit runs) and claimed or
-    refused, in ``d.compliance`` as a record of kind 'calibrated spectrum'. Unlike the bands'
-    shafts, a refused one is not tried again with the periodic sources re-estimated."""
+    refused, in ``d.compliance`` as a record of kind 'calibrated spectrum', with the periodic
+    sources re-estimated where the check refuses it beside them (:func:`checked_shaft`), as
+    the bands' shafts are. The mode is the grid's best refined (:func:`calibrate.refine`);
+    the claim's range holds the modes tried that fit as well (:func:`calibrated_mode`)."""
     from webline.diagnosis import calibrate
     c = max(d.fit_ctx(), key=lambda c: int(np.sum(c.mask)))
     sims0 = d.steps[-1]["sims"]
@@ -1087,31 +1099,35 @@ def calibrated(d, noise, specs):
         log.info("  no shaft claimed: %s", rec["why"])
         return
     spec = next(sp for sp in specs if sp[0] == b0["element"])
-    ft = b0["torsional_hz"]
+    b1, modes_range = calibrated_mode(res, fl)
+    ft = b1["torsional_hz"]
+    rec["calibrated"].update(grid_hz=b0["torsional_hz"], torsional_hz=ft, range_hz=modes_range,
+                             tried_hz={f"{r['torsional_hz']:.4g}": r["misfit"] for r in res["refined"]["tried"]}
+                             if res.get("refined") else None)
+    hump["frequency_hz"] = ft
     # the ripple levels and what the shaft explains, at its calibration
     cal = calibrate.Calibration(d.model, c.run, sets, [sp[0] for sp in specs], list(c.sensors), speed,
-                                shaft=(spec, ft), form=b0["form"])
-    G = calibrate.responses(d.model, c.run, cal.doc(np.log([b0["scales"][n] for n in cal.names])),
+                                shaft=(spec, ft), form=b1["form"])
+    G = calibrate.responses(d.model, c.run, cal.doc(np.log([b1["scales"][n] for n in cal.names])),
                             [sp[0] for sp in specs], list(c.sensors), f, speed)
     _, levels, (Gx, R) = calibrate.misfit(P, G, S0, f, band)
     explained, shares = ripple_shares(P, Gx, R, levels, sensor, (f >= band[0]) & (f <= band[1]))
     explained, own = explained or 0.0, shares[spec[0]]
     doc = others._drive_doc(copy.deepcopy(d.refined_doc), spec, ft, 0.0, zeta=ZETA)
-    p = {"element": spec[0], "torsional_hz": ft, "zeta": ZETA, "misfit": b0["misfit"], "explained": explained,
+    p = {"element": spec[0], "torsional_hz": ft, "zeta": ZETA, "misfit": b1["misfit"], "explained": explained,
          "levels": {e: math.sqrt(v) for e, v in levels.items() if not e.startswith("_")},
          "own_share": own, "spec": spec, "doc": doc, "form": None, "sets": {}}
-    rec["tried"][0].update(explained=explained, own_share=own)
+    rec["tried"][0].update(explained=explained, own_share=own, torsional_hz=ft, misfit=b1["misfit"], form=b1["form"])
     base = (res["rigid"]["misfit"], None, {})
-    sims_b = d._simulate_all(doc, f"refined +{spec[0]} compliance {ft:.3g} Hz (calibrated spectrum)")
-    chk = _nrmse_check(d, sims0, sims_b, base, p)
-    log.info("  check of %s's shaft at %.3g Hz (calibrated spectrum, ratio %.3g): %s",
-             spec[0], ft, res["ratio"], chk["reason"])
+    p, sims_b, chk = checked_shaft(d, p, base, " (calibrated spectrum)")
+    log.info("  check of %s's shaft at %.3g Hz (calibrated spectrum, ratio %.3g%s): %s", spec[0], ft, res["ratio"],
+             ", periodic effects re-estimated" if p.get("new_X") is not None else "", chk["reason"])
     if not chk["accepted"]:
         d._reject(spec[0], "compliance", "shaft check", None, reason=chk["reason"],
                   nrmse_before=chk["nrmse_before"], nrmse_after=chk["nrmse_after"], torsional_hz=ft)
         rec["why"] = chk["reason"]
         worst = max(chk["rise_t"], key=lambda s: chk["nrmse_after"][s] / chk["nrmse_before"][s])
-        rec["refused"] = {"element": spec[0], "torsional_hz": ft, "explained": explained, "misfit": b0["misfit"],
+        rec["refused"] = {"element": spec[0], "torsional_hz": ft, "explained": explained, "misfit": b1["misfit"],
                           "rigid_misfit": base[0], "sensor": worst,
                           "rise": chk["nrmse_after"][worst] / chk["nrmse_before"][worst] - 1.0,
                           "rise_t": chk["rise_t"][worst]}
@@ -1119,12 +1135,16 @@ def calibrated(d, noise, specs):
             rec["refused"]["holdout"] = holdout_view(d, p)
         return
     eff = _effect(hump, rec, [p] + [dict(t, spec=None) for t in res["shafts"][1:]], base, chk)
-    eff["parameters"]["torsional_frequency"]["range"] = [ft, ft]
+    eff["parameters"]["torsional_frequency"]["range"] = list(modes_range)
     eff["detail"] += (f"; calibrated, it fits {band[0]:g}-{band[1]:g} Hz {res['ratio']:.3g} x better than the "
-                      f"rigid line")
+                      f"rigid line, its mode {ft:.3g} Hz ({modes_range[0]:.3g}-{modes_range[1]:.3g} Hz fit "
+                      f"within half the misfit noise leaves of the modes' grid)")
     rec["claimed"] = spec[0]
+    if p.get("new_X") is not None:
+        regress.adopt(d, p["new_X"])
+        eff["detail"] += "; the periodic effects re-estimated with it"
     d.other = list(getattr(d, "other", []) or []) + [eff]
-    d.refined_doc = doc
+    d.refined_doc = p["doc"]
     d.steps.append({"added": spec[0], "kind": "compliance", "sims": sims_b, "check": chk})
     log.info("  claimed: %s", eff["detail"])
 
@@ -1139,6 +1159,22 @@ def calibrated_or_note(d, noise, specs):
         msg = (str(exc).splitlines() or [type(exc).__name__])[0][:300]
         log.warning("  the calibrated shaft screen failed: %s", msg)
         d.notes.append(f"the calibrated shaft screen (--calibrated-shafts) failed and claimed nothing: {msg}")
+
+
+def calibrated_mode(res, floor):
+    """(row, (low, high) Hz) of the calibrated scan ``res``: the best shaft with its mode
+    refined (:func:`calibrate.refine`; the grid's row without a refinement) and the range of
+    the modes tried on its drive whose misfit lies within :data:`CALIBRATED_GAIN_X` x
+    ``floor`` (the measure that admits the shaft at all) of the grid's best: the grid's
+    fits start from the layout, the refinement's from a calibration already found, so a
+    refined mode's lower misfit is partly the longer search's, and the range is measured
+    from the grid's (seed-50 c09: grid 5 Hz 0.0593, 7 Hz 0.0620; refined 5.45 Hz 0.0522)."""
+    ref, g = res.get("refined"), res["shafts"][0]
+    if not ref:
+        return g, (g["torsional_hz"], g["torsional_hz"])
+    b = ref["row"]
+    near = [r["torsional_hz"] for r in ref["tried"] if r["misfit"] <= g["misfit"] + CALIBRATED_GAIN_X * floor]
+    return b, (min(near + [b["torsional_hz"]]), max(near + [b["torsional_hz"]]))
 
 
 def calibrated_refusal(res, floor):
