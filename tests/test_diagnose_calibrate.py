@@ -153,3 +153,30 @@ def test_a_failing_calibrated_stage_is_a_note_not_a_stop(monkeypatch):
     compliance.calibrated_or_note(d, {}, [("sw_leader", 0.1, ("inertia", 0.1))])
     assert d.notes == ["the calibrated shaft screen (--calibrated-shafts) failed and claimed nothing: "
                        "the linearisation cannot hold this layout"]
+
+
+def _scan(rigid, rows):
+    shafts = sorted(({"element": e, "torsional_hz": 10.0, "misfit": m} for e, m in rows.items()),
+                    key=lambda r: r["misfit"])
+    return {"band_hz": [4.0, 24.0], "rigid": {"misfit": rigid}, "shafts": shafts,
+            "ratio": rigid / shafts[0]["misfit"]}
+
+
+@pytest.mark.parametrize("rows, element, vetoed", [
+    # seed-58 c09's calibrated misfits: the rewind 2.69 x, the unwind a band claimed 1.04 x
+    ({"rewind": 0.1326, "sw_leader": 0.3202, "unwind": 0.3434}, "unwind", True),
+    ({"rewind": 0.1326, "sw_leader": 0.3202, "unwind": 0.3434}, "rewind", False),   # the same drive
+    ({"rewind": 0.1326, "sw_leader": 0.3202, "unwind": 0.2500}, "unwind", False),   # its own 1.43 x: no veto
+    ({"rewind": 0.3400, "sw_leader": 0.3202, "unwind": 0.3434}, "unwind", False),   # no drive passes the rule
+])
+def test_a_bands_claim_is_vetoed_only_where_the_calibrated_scan_puts_the_shaft_elsewhere(
+        monkeypatch, rows, element, vetoed):
+    """:func:`compliance.calibrated_veto` on the calibrated misfits of independent seed-58 c09
+    (rigid line 0.3566; the misfit floor of 50 s)."""
+    ctx = SimpleNamespace(mask=np.ones(int(50 * 250), bool), fs=250.0)
+    monkeypatch.setattr(compliance, "calibrated_scan", lambda d, noise, specs, memo=None: (_scan(0.3566, rows), (ctx,)))
+    why = compliance.calibrated_veto(SimpleNamespace(), {}, [], element)
+    assert (why is not None) == vetoed, why
+    if vetoed:
+        assert why.startswith("calibrated over 4-24 Hz, the line's ripple spectrum puts the shaft on rewind")
+        assert "unwind's own fits 1.04 x (needs 1.2 x)" in why
