@@ -46,9 +46,9 @@ def parser():
                     help="do not fit the drives' torque ripple to the residual's humps (each hump stays "
                          "an unexplained resonance)")
     ap.add_argument("--calibrated-shafts", action="store_true",
-                    help="no shaft claimed otherwise: seek one with the line's fast dynamics calibrated to the "
-                         "ripple spectrum (minutes more; docs/diagnose.md, 'The ripple spectrum with the line "
-                         "calibrated')")
+                    help="fit the ripple spectrum with the line's fast dynamics calibrated: a band's shaft "
+                         "claim on one drive is vetoed where that puts the shaft on another, and with no shaft "
+                         "claimed one is sought (minutes more; docs/diagnose.md, 'The calibrated shaft screen')")
     ap.add_argument("--no-transfer", action="store_true",
                     help="keep every estimated order in the refined layout, also those whose held-out "
                          "prediction does not carry over lines within the data sheet's tolerances")

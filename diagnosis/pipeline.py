@@ -131,9 +131,10 @@ class Options:
     #                                  order's amplitude range; held-out runs: leave out orders whose
     #                                  prediction there does not carry over those lines
     ripple: bool = True              # fit the drives' torque ripple to the residual's humps (diagnosis.ripple)
-    calibrated_shafts: bool = False  # ... and, no shaft claimed, a shaft against the rigid line with the line's
-                                     # fast dynamics calibrated to the ripple spectrum (compliance.calibrated;
-                                     # opt-in while measured: minutes a record)
+    calibrated_shafts: bool = False  # ... and the line's fast dynamics calibrated to the ripple spectrum: a
+                                     # band's shaft vetoed where that puts it on another drive, and, no shaft
+                                     # claimed, one sought against the rigid line (compliance.calibrated_veto,
+                                     # compliance.calibrated; opt-in while measured: minutes a record)
     estimator: str = "time"          # Fourier coefficients: "time" (data regressed on simulated
     #                                  responses, diagnosis.regress; ramps and speed-dependent gains
     #                                  included) or "harmonic" (measured harmonic / complex gain)
