@@ -146,7 +146,7 @@ def test_a_calibrated_shaft_needs_both_the_ratio_and_a_drop_beyond_noise(rigid, 
 
 
 def test_a_failing_calibrated_stage_is_a_note_not_a_stop(monkeypatch):
-    def boom(d, noise, specs):
+    def boom(d, noise, specs, memo=None):
         raise RuntimeError("the linearisation cannot hold this layout\nsecond line")
     monkeypatch.setattr(compliance, "calibrated", boom)
     d = SimpleNamespace(notes=[])
