@@ -735,7 +735,8 @@ class Diagnosis:
                 break
             best = sig[0]
             group = [best] + [d for d in scores if d is not best and d["E"] >= self.opt.ambiguity * best["E"]
-                              and d["logp"] < self.opt.significance and d["coherence"] >= self.opt.min_coherence]
+                              and d["logp"] < self.opt.significance and d["coherence"] >= self.opt.min_coherence
+                              and self._lines_overlap(fit, best["cand"], d["cand"])]
             group = group[:max(1, self.opt.max_group)]
             eff = {"group": group, "best": best, "resid_before": copy.deepcopy(resid)}
             self.effects.append(eff)
@@ -1048,6 +1049,29 @@ class Diagnosis:
         if energy(kap) < 1.2 * e0 + 1e-30 or abs(kap) < 0.5 / (hmax * revs):
             return 0.0
         return kap
+
+    def _lines_overlap(self, fit, a, b):
+        """Whether candidates ``a`` and ``b`` put their lines on each other's in every fit run:
+        one fundamental is the other's times n, n up to :attr:`Options.harmonics`, closer than
+        three frequency bins of the run's fit window (f the mean rate of each refined angle
+        there): equal radii, or an element at a sub-multiple whose higher orders fall on the
+        other's lines. Only such families can stand for each other; two families that share a
+        line or two (4 and 3 Hz at 12 Hz) or stand apart in some run are two
+        sources, each screened on its own (independent seed-58 c17: guide_in at 4.65 Hz and the
+        idlers at 3.41 Hz, the idlers' 0.86 of guide_in's energy, were taken as one tie, and
+        guide_in was dropped with the idlers' estimate)."""
+        H = self.opt.harmonics
+        for c in fit:
+            m = np.flatnonzero(c.mask)
+            if len(m) < 2:
+                continue
+            span = (m[-1] - m[0]) / c.fs
+            fa, fb = (abs(self._theta_refined(c, k)[m[-1]] - self._theta_refined(c, k)[m[0]]) / (2 * math.pi * span)
+                      for k in (a, b))
+            tol = 3.0 / (len(m) / c.fs)
+            if not any(min(abs(fa - n * fb), abs(fb - n * fa)) < tol for n in range(1, H + 1)):
+                return False
+        return True
 
     def _theta_refined(self, c, k):
         th = c.theta[k.key]
