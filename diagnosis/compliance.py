@@ -1220,12 +1220,8 @@ def calibrated_or_note(d, noise, specs, memo=None):
     """:func:`calibrated`, and where it fails (a layout the linearisation cannot hold, a
     simulation that fails), a note in the report instead of the diagnosis stopping: the
     stage is an extra search, and what the screens before it found stands."""
-    try:
-        calibrated(d, noise, specs, memo)
-    except Exception as exc:  # noqa: BLE001 - any failure of the extra stage is reported, not raised
-        msg = (str(exc).splitlines() or [type(exc).__name__])[0][:300]
-        log.warning("  the calibrated shaft screen failed: %s", msg)
-        d.notes.append(f"the calibrated shaft screen (--calibrated-shafts) failed and claimed nothing: {msg}")
+    _noted(d, "the calibrated shaft screen (--calibrated-shafts) failed and claimed nothing", calibrated,
+           d, noise, specs, memo)
 
 
 def calibrated_mode(res, floor):
@@ -1244,17 +1240,24 @@ def calibrated_mode(res, floor):
     return b, (min(near + [b["torsional_hz"]]), max(near + [b["torsional_hz"]]))
 
 
+def _noted(d, failed, fn, *args):
+    """``fn(*args)``, or None and a note ``failed: message`` in the report where it fails: the
+    calibrated stage and veto are extra searches, and what the screens before them found
+    stands."""
+    try:
+        return fn(*args)
+    except Exception as exc:  # noqa: BLE001 - any failure of an extra search is reported, not raised
+        msg = (str(exc).splitlines() or [type(exc).__name__])[0][:300]
+        log.warning("  %s: %s", failed, msg)
+        d.notes.append(f"{failed}: {msg}")
+        return None
+
+
 def _calibrated_veto_or_note(d, noise, specs, element, memo):
     """:func:`calibrated_veto`, and where the calibrated scan fails, a note and no veto: the
     band's claim stands as it would without the option."""
-    try:
-        return calibrated_veto(d, noise, specs, element, memo)
-    except Exception as exc:  # noqa: BLE001 - an extra check's failure is reported, not raised
-        msg = (str(exc).splitlines() or [type(exc).__name__])[0][:300]
-        log.warning("  the calibrated veto failed: %s", msg)
-        d.notes.append(f"the calibrated shaft screen (--calibrated-shafts) failed; {element}'s shaft was "
-                       f"claimed without it: {msg}")
-        return None
+    return _noted(d, f"the calibrated shaft screen (--calibrated-shafts) failed; {element}'s shaft was claimed "
+                     f"without it", calibrated_veto, d, noise, specs, element, memo)
 
 
 def calibrated_refusal(res, floor):

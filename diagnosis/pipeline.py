@@ -1062,13 +1062,8 @@ class Diagnosis:
         guide_in was dropped with the idlers' estimate)."""
         H = self.opt.harmonics
         for c in fit:
-            m = np.flatnonzero(c.mask)
-            if len(m) < 2:
-                continue
-            span = (m[-1] - m[0]) / c.fs
-            fa, fb = (abs(self._theta_refined(c, k)[m[-1]] - self._theta_refined(c, k)[m[0]]) / (2 * math.pi * span)
-                      for k in (a, b))
-            tol = 3.0 / (len(m) / c.fs)
+            fa, fb = (self._mean_freq(c, self._theta_refined(c, k)) for k in (a, b))
+            tol = 3.0 / (np.count_nonzero(c.mask) / c.fs)
             if not any(min(abs(fa - n * fb), abs(fb - n * fa)) < tol for n in range(1, H + 1)):
                 return False
         return True

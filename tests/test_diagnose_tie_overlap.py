@@ -15,11 +15,13 @@ FS, T = 250.0, 60.0
 
 def _run(rates):
     t = np.arange(0.0, T, 1.0 / FS)
-    return SimpleNamespace(fs=FS, mask=np.ones(len(t), bool), theta={k: 2 * math.pi * f * t for k, f in rates.items()})
+    return SimpleNamespace(fs=FS, t=t, mask=np.ones(len(t), bool),
+                           theta={k: 2 * math.pi * f * t for k, f in rates.items()})
 
 
 def _overlap(runs, a, b):
     d = SimpleNamespace(opt=Options(), _theta_refined=lambda c, k: c.theta[k.key])
+    d._mean_freq = lambda c, th: Diagnosis._mean_freq(d, c, th)
     return Diagnosis._lines_overlap(d, runs, SimpleNamespace(key=a), SimpleNamespace(key=b))
 
 
