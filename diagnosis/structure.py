@@ -145,6 +145,7 @@ def alternatives(d):
 SHAFT_RATIOS = (0.6, 0.8, 1.0, 1.25, 1.5)   # shaft forms: torsional mode / the first effect's fundamental
 SHAFT_MARGIN = 0.1   # a drive form's sum of NRMSE^2 below the best rigid form's with the same sources, at least
 DEAD_ZONE_DEG = 1.0  # dead-zone forms: total width (one; the report says the width is the form's, not estimated)
+ON_LINE = 0.02       # a shaft's mode within this share of a periodic effect's fundamental sits on its line
 
 
 def _rigid_in_own_parameters(r, drive_forms):
@@ -297,11 +298,49 @@ def kind_rivals_text(el, kind, rivals, score):
             f"{' or '.join(KIND_NAMES.get(x['kind'], x['kind']) for x in rivals)} is not identifiable from these runs")
 
 
-def _drive_effect(chosen, drive_forms, scored, cur_score):
+def line_under_mode(d, effs, f_t):
+    """(element, [its fundamental in Hz per fit run]) of the first periodic effect of ``effs``
+    ([(cand, X0, fe)]) whose fundamental lies within :data:`ON_LINE` of the mode ``f_t`` in
+    every fit run that holds it, or None. A mode on the line it must carry between the zones
+    only turns that line's gain and phase, which a dead zone the line's swing crosses once a
+    turn does too (independent seed-39 c17 and seed-47 c12: true leader dead zones claimed as
+    leader shafts at 1.00 x guide_in's 5.61 Hz and 1.00 x an idler's 4.45 Hz; no true shaft
+    of seeds 30-58 was claimed on a line); runs at two line speeds move the line off a shaft's
+    fixed mode, so there the test fails and the mode stands."""
+    for cand, _X0, _fe in effs:
+        fs = [c.freq.get(cand.key, 0.0) * (1.0 + c.kappa.get(cand.key, 0.0))
+              for c in d.fit_ctx() if d.orders_for(c, cand.key)]
+        if fs and all(f > 0 and abs(f_t / f - 1.0) <= ON_LINE for f in fs):
+            return cand.element, fs
+    return None
+
+
+def on_line_text(el, value, on_line, dead_zone, dz_score, score):
+    """What the detail of a shaft claim whose mode ``value`` (Hz) sits on a line adds
+    (``on_line``: :func:`line_under_mode`'s answer; ``dead_zone``: whether a dead zone on
+    ``el`` was screened, as it is where the drive's torque swings through zero; ``dz_score``:
+    the best simulated dead-zone form's sum of NRMSE^2, None if none was simulated;
+    ``score``: the claim's)."""
+    src, fs = on_line
+    txt = (f"; its mode sits on {src}'s line ({', '.join(f'{f:.3g}' for f in fs)} Hz in the fit runs, "
+           f"{value / fs[0]:.2f} x): a resonance there turns that line's gain and phase, so these runs do "
+           f"not place the mode")
+    if dead_zone:
+        fitted = (f"fitted {dz_score:.4g} against {score:.4g}" if dz_score is not None
+                  else "screened, not simulated")
+        txt += (f", and a dead zone in {el}'s drive that {src}'s swing crosses once a turn does the same "
+                f"(the dead-zone form, at the data sheet's web damping, EA and friction, which its waveform "
+                f"hangs on, {fitted}): whether {el}'s drive has a compliant shaft or a dead zone is not "
+                f"identifiable from these runs")
+    return txt + "; a run at another line speed moves the line off a shaft's fixed mode and would tell"
+
+
+def _drive_effect(chosen, drive_forms, scored, cur_score, on_line=None):
     """The compliance or backlash a chosen drive form (``drive_forms``: form name -> (element,
     kind, torsional mode Hz or dead-zone width deg)) claims, as an effect of the report
     (the others' record shape); its confidence: how much better it fits than the best
-    rigid form simulated with as many sources (or the layout's own)."""
+    rigid form simulated with as many sources (or the layout's own). ``on_line``: a shaft's
+    mode on a periodic effect's line (:func:`line_under_mode`), None if not."""
     el, kind, value = drive_forms[chosen["form"]]
     if chosen.get("without"):
         # a drive form chosen with a source fewer (parsimony) is measured against that set in the
@@ -358,16 +397,25 @@ def _drive_effect(chosen, drive_forms, scored, cur_score):
     # layout's forms, 20.5 Hz with the truth's current lags alone, 10.5 Hz with all its forms)
     modes = [value] + [drive_forms[r["form"]][2] for r in as_well if drive_forms[r["form"]][:2] == (el, kind)]
     lo, hi = min(modes), max(modes)
+    pinned = ""
+    if on_line is not None:
+        dz = [r["score"] for r in scored if drive_forms.get(r.get("form"), ())[:2] == (el, "backlash")]
+        has_dz = any(v[:2] == (el, "backlash") for v in drive_forms.values())
+        pinned = on_line_text(el, value, on_line, has_dz, min(dz) if dz else None, chosen["score"])
+        eff["mode_on_line"] = {"element": on_line[0], "line_hz": list(on_line[1])}
+        if has_dz:
+            eff["kind_identifiable"] = False
     return {**eff, "fundamental_hz": value,
             "confidence_basis": (f"a compliant shaft on {el}'s drive (torsional mode {value:.3g} Hz, a grid of "
                                  f"{', '.join(f'{x:g}' for x in SHAFT_RATIOS)} x the first effect's fundamental) "
                                  f"carries the periodic effects' lines between the tension zones as the data do: "
                                  f"{scores}"),
-            "parameters": {"torsional_frequency": {"estimated": value, "unit": "Hz", "range": [lo, hi]},
+            "parameters": {"torsional_frequency": {"estimated": value, "unit": "Hz", "range": [lo, hi],
+                                                   "identifiable": on_line is None},
                            "damping_ratio": {"estimated": 0.05, "unit": "1"}},
             "detail": (f"{el} compliance, torsional mode {value:.3g} Hz (a model form of the structure screen"
                        + (f"; shafts on {el} at {lo:.3g}-{hi:.3g} Hz fit about as well" if hi > lo else "")
-                       + ")" + kind_rivals_text(el, kind, rivals, chosen["score"]))}
+                       + ")" + kind_rivals_text(el, kind, rivals, chosen["score"]) + pinned)}
 
 
 def _apply(doc, sets):
@@ -1056,9 +1104,12 @@ def screen(d):
                 f"may be off by more than {100 * AMPLITUDE_PRECISION:.0f} %")
             d.notes.append(unc[cand.element]["note"])
     if chosen is not results[0] and chosen.get("form") in drive_forms:
-        eff = _drive_effect(chosen, drive_forms, scored, cur_score)
+        el_, kind_, value_ = drive_forms[chosen["form"]]
+        held = [e for e in pool if e[0].element in chosen.get("X", {})]
+        eff = _drive_effect(chosen, drive_forms, scored, cur_score,
+                            on_line=line_under_mode(d, held, value_) if kind_ == "compliance" else None)
         d.other = list(getattr(d, "other", []) or []) + [eff]
-        if not eff["kind_identifiable"]:
+        if not eff["kind_identifiable"] or eff.get("mode_on_line"):
             d.notes.append(eff["detail"])
     d.structure["chosen"] = chosen.get("form", chosen["name"])
     if chosen.get("tolerance_line"):

@@ -549,3 +549,47 @@ def test_a_drive_form_says_when_a_form_of_another_kind_on_its_drive_fits_about_a
     eff = structure._drive_effect(dz, forms, [rigid, dz, sh], 0.397)
     assert eff["kind"] == "backlash" and eff["kind_rivals"][0]["kind"] == "compliance"
     assert "a compliant shaft (" in eff["detail"]
+
+
+def test_a_shaft_whose_mode_sits_on_a_sources_line_is_placed_by_no_run_at_that_speed():
+    """A mode on the line it carries between the zones only turns that line's gain and
+    phase, as a dead zone the line's swing crosses once a turn does (independent seed-39
+    c17: a true 1.24 deg leader dead zone claimed as a leader shaft at 5.61 Hz, 1.00 x
+    guide_in's fundamental; the dead-zone form 0.4229 against the shaft's 0.1045). The
+    claim says so; two fit runs at speeds that move the line off the mode do not."""
+    from types import SimpleNamespace
+    from webline.diagnosis import structure
+
+    def diag(freqs):
+        ctx = [SimpleNamespace(freq={"g": f}, kappa={"g": 0.0}) for f in freqs]
+        return SimpleNamespace(fit_ctx=lambda: ctx, orders_for=lambda c, key: [1, 2])
+
+    g = (SimpleNamespace(element="guide_in", key="g"), None, None)
+    assert structure.line_under_mode(diag([5.6138]), [g], 5.6138) == ("guide_in", [5.6138])
+    assert structure.line_under_mode(diag([5.6138]), [g], 1.02 * 5.6138 * 0.999)[0] == "guide_in"
+    # the grid's next shaft, 1.25 x the line, and a second run at another speed: placed
+    assert structure.line_under_mode(diag([5.6138]), [g], 7.0173) is None
+    assert structure.line_under_mode(diag([5.6138, 4.21]), [g], 5.6138) is None
+    forms = {"ff ref + lc2 + shaft on sw_leader at 5.61 Hz": ("sw_leader", "compliance", 5.6138),
+             "ff ref + lc2 + dead zone on sw_leader": ("sw_leader", "backlash", 1.0)}
+    chosen = {"name": "ff ref + lc2 + shaft on sw_leader at 5.61 Hz",
+              "form": "ff ref + lc2 + shaft on sw_leader at 5.61 Hz", "score": 0.1045}
+    dz = {"name": "ff ref + lc2 + dead zone on sw_leader", "form": "ff ref + lc2 + dead zone on sw_leader",
+          "score": 0.4248}
+    rigid = {"name": "ff ref + lc2", "form": "ff ref + lc2", "score": 0.4281}
+    on = ("guide_in", [5.6138])
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, dz], 1.0498, on_line=on)
+    assert eff["kind"] == "compliance" and eff["kind_identifiable"] is False
+    assert eff["mode_on_line"] == {"element": "guide_in", "line_hz": [5.6138]}
+    assert eff["parameters"]["torsional_frequency"]["identifiable"] is False
+    assert "sits on guide_in's line (5.61 Hz in the fit runs, 1.00 x)" in eff["detail"]
+    assert "fitted 0.4248 against 0.1045" in eff["detail"] and "another line speed" in eff["detail"]
+    # no dead zone screened on the drive (its torque never swings through zero): the mode alone
+    eff = structure._drive_effect(chosen, {k: v for k, v in forms.items() if v[1] == "compliance"},
+                                  [rigid, chosen], 1.0498, on_line=on)
+    assert eff["kind_identifiable"] is True and "dead zone" not in eff["detail"]
+    assert eff["parameters"]["torsional_frequency"]["identifiable"] is False
+    # off the line: as before
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, dz], 1.0498)
+    assert eff["kind_identifiable"] is True and "mode_on_line" not in eff
+    assert eff["parameters"]["torsional_frequency"]["identifiable"] is True and "sits on" not in eff["detail"]
