@@ -164,11 +164,12 @@ def scan(model, run, sets, specs, sensors, speed, P, S0, f, band=BAND_HZ, modes_
     told after each fit."""
     drives = [sp[0] for sp in specs]
     forms = list(forms) if forms is not None else _forms(model, sets, drives)
+    fit = Fit(model, run, sets, drives, sensors, speed, P, S0, f, band)
 
     def best_of(shaft):
         row = None
         for form in forms:
-            r = _fit_row(model, run, sets, drives, sensors, speed, P, S0, f, band, maxfev, shaft, form, None, progress)
+            r = fit.row(maxfev, shaft, form, None, progress)
             if row is None or r["misfit"] < row["misfit"]:
                 row = r
         return row
@@ -184,37 +185,52 @@ def scan(model, run, sets, specs, sensors, speed, P, S0, f, band=BAND_HZ, modes_
     if shafts and refine_best:
         b = shafts[0]
         spec = next(sp for sp in specs if sp[0] == b["element"])
-        row, tried = refine(model, run, sets, spec, b, drives, sensors, speed, P, S0, f, band, progress=progress)
+        row, tried = refine(fit, spec, b, progress=progress)
         refined = {"row": row, "tried": sorted([r for r in by_drive[b["element"]] if r is not b] + tried,
                                                key=lambda r: r["torsional_hz"])}
     return {"band_hz": list(band), "forms": [f or "as written" for f in forms], "rigid": rigid,
             "shafts": shafts, "ratio": ratio, "refined": refined}
 
 
-def _fit_row(model, run, sets, drives, sensors, speed, P, S0, f, band, maxfev, shaft, form, start, progress):
-    """One calibrated fit as a row of :func:`scan`."""
-    cal = Calibration(model, run, sets, drives, sensors, speed, shaft=shaft, form=form)
-    c0, c1, sc, _ = cal.fit(P, S0, f, band, maxfev, start=start)
-    if progress:
-        progress(f"{'rigid line' if not shaft else f'{shaft[0][0]} shaft {shaft[1]:.3g} Hz'}"
-                 f" ({form or 'as written'}): {c0:.4g} -> {c1:.4g}")
-    return {"element": shaft[0][0] if shaft else None, "torsional_hz": shaft[1] if shaft else None,
-            "form": form, "misfit": c1, "misfit_as_written": c0, "scales": sc}
+@dataclasses.dataclass(frozen=True)
+class Fit:
+    """What every calibrated fit of one scan shares: the line (``model``, its ``run`` at
+    ``speed``, the layout entries ``sets``, the ``drives`` scaled and the ``sensors``) and the
+    residual's spectrum it is fitted to (``P`` over ``f``, floor ``S0``, within ``band``)."""
+    model: object
+    run: object
+    sets: dict
+    drives: list
+    sensors: list
+    speed: float
+    P: object
+    S0: object
+    f: object
+    band: tuple = BAND_HZ
+
+    def row(self, maxfev, shaft, form, start, progress):
+        """One calibrated fit as a row of :func:`scan`."""
+        cal = Calibration(self.model, self.run, self.sets, self.drives, self.sensors, self.speed,
+                          shaft=shaft, form=form)
+        c0, c1, sc, _ = cal.fit(self.P, self.S0, self.f, self.band, maxfev, start=start)
+        if progress:
+            progress(f"{'rigid line' if not shaft else f'{shaft[0][0]} shaft {shaft[1]:.3g} Hz'}"
+                     f" ({form or 'as written'}): {c0:.4g} -> {c1:.4g}")
+        return {"element": shaft[0][0] if shaft else None, "torsional_hz": shaft[1] if shaft else None,
+                "form": form, "misfit": c1, "misfit_as_written": c0, "scales": sc}
 
 
-def refine(model, run, sets, spec, row, drives, sensors, speed, P, S0, f, band=BAND_HZ, steps=REFINE_STEPS,
-           maxfev=REFINE_MAXFEV, progress=None):
+def refine(fit, spec, row, steps=REFINE_STEPS, maxfev=REFINE_MAXFEV, progress=None):
     """The mode of the shaft ``row`` (on ``spec``'s drive, in its form) refined between the
     grid's neighbours: at ``row``'s mode times and over each of ``steps`` in turn, around the
-    best so far, each fit started from the calibration of the one it steps from. Returns
-    (best row, the rows tried). Seed-50 c09's leader shaft (7.6 Hz) was claimed at the grid's
-    5 Hz before (docs/diagnose.md, "The calibrated shaft screen")."""
+    best so far, each fit (:class:`Fit`) started from the calibration of the one it steps from.
+    Returns (best row, the rows tried). Seed-50 c09's leader shaft (7.6 Hz) was claimed at the
+    grid's 5 Hz before (docs/diagnose.md, "The calibrated shaft screen")."""
     best, tried = row, []
     for k in steps:
         centre = best
         for m in (centre["torsional_hz"] / k, centre["torsional_hz"] * k):
-            r = _fit_row(model, run, sets, drives, sensors, speed, P, S0, f, band, maxfev, (spec, m),
-                         centre["form"], centre["scales"], progress)
+            r = fit.row(maxfev, (spec, m), centre["form"], centre["scales"], progress)
             tried.append(r)
             if r["misfit"] < best["misfit"]:
                 best = r
