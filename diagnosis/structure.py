@@ -401,7 +401,9 @@ def _drive_effect(chosen, drive_forms, scored, cur_score, on_line=None):
     if on_line is not None:
         dz = [r["score"] for r in scored if drive_forms.get(r.get("form"), ())[:2] == (el, "backlash")]
         has_dz = any(v[:2] == (el, "backlash") for v in drive_forms.values())
-        pinned = on_line_text(el, value, on_line, has_dz, min(dz) if dz else None, chosen["score"])
+        # a dead zone already named as fitting about as well is not named twice
+        pinned = on_line_text(el, value, on_line, has_dz and not rivals, min(dz) if dz else None,
+                              chosen["score"])
         eff["mode_on_line"] = {"element": on_line[0], "line_hz": list(on_line[1])}
         if has_dz:
             eff["kind_identifiable"] = False
@@ -1104,7 +1106,7 @@ def screen(d):
                 f"may be off by more than {100 * AMPLITUDE_PRECISION:.0f} %")
             d.notes.append(unc[cand.element]["note"])
     if chosen is not results[0] and chosen.get("form") in drive_forms:
-        el_, kind_, value_ = drive_forms[chosen["form"]]
+        _, kind_, value_ = drive_forms[chosen["form"]]
         held = [e for e in pool if e[0].element in chosen.get("X", {})]
         eff = _drive_effect(chosen, drive_forms, scored, cur_score,
                             on_line=line_under_mode(d, held, value_) if kind_ == "compliance" else None)

@@ -589,6 +589,11 @@ def test_a_shaft_whose_mode_sits_on_a_sources_line_is_placed_by_no_run_at_that_s
                                   [rigid, chosen], 1.0498, on_line=on)
     assert eff["kind_identifiable"] is True and "dead zone" not in eff["detail"]
     assert eff["parameters"]["torsional_frequency"]["identifiable"] is False
+    # a dead zone that fits about as well is named once, as a rival
+    near = dict(dz, score=0.1100)
+    eff = structure._drive_effect(chosen, forms, [rigid, chosen, near], 1.0498, on_line=on)
+    assert eff["kind_identifiable"] is False and eff["kind_rivals"][0]["score"] == 0.1100
+    assert eff["detail"].count("is not identifiable from these runs") == 1 and "sits on guide_in's line" in eff["detail"]
     # off the line: as before
     eff = structure._drive_effect(chosen, forms, [rigid, chosen, dz], 1.0498)
     assert eff["kind_identifiable"] is True and "mode_on_line" not in eff
