@@ -24,17 +24,20 @@ import copy
 import dataclasses
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from webline.diagnosis import backlash, layout_edit
-from webline.diagnosis import runs as R
-from webline.diagnosis.line_model import LineModel
-from webline.orchestrator import units
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from shaft_probe import SENSORS, with_sets  # noqa: E402
 
-SENSORS = ("lc9.T", "lc19.T")
+from webline.diagnosis import backlash  # noqa: E402
+from webline.diagnosis import runs as R  # noqa: E402
+from webline.diagnosis.line_model import LineModel  # noqa: E402
+from webline.orchestrator import units  # noqa: E402
+
 DRIVES = ("unwind", "sw_leader", "rewind")
 FORMS = {
     "ffref": {f"drives.speed_loops.{x}.feedforward": "reference" for x in DRIVES},
@@ -52,12 +55,6 @@ GROUPS = {
     "inertias": lambda k, el: (k.endswith("inertia") or k.endswith(".mass") or k.endswith("radius"))
     and k != f"path.{el}.inertia",
 }
-
-
-def with_sets(doc, sets):
-    for k, v in sets.items():
-        doc = layout_edit.with_set(doc, k, v)
-    return doc
 
 
 class Case:

@@ -199,7 +199,7 @@ def shaft_forms(d, effs):
         return []
     cand = effs[0][0]
     c0 = next((c for c in d.fit_ctx() if d.orders_for(c, cand.key)), None)
-    f = c0.freq.get(cand.key, 0.0) * (1.0 + c0.kappa.get(cand.key, 0.0)) if c0 is not None else 0.0
+    f = _line_hz(c0, cand) if c0 is not None else 0.0
     if f <= 0:
         return []
     out = []
@@ -298,6 +298,12 @@ def kind_rivals_text(el, kind, rivals, score):
             f"{' or '.join(KIND_NAMES.get(x['kind'], x['kind']) for x in rivals)} is not identifiable from these runs")
 
 
+def _line_hz(c, cand):
+    """``cand``'s fundamental in fit run ``c`` (Hz), its rate refined (``kappa``): where the
+    shaft grid is placed and where a mode counts as on the line."""
+    return c.freq.get(cand.key, 0.0) * (1.0 + c.kappa.get(cand.key, 0.0))
+
+
 def line_under_mode(d, effs, f_t):
     """(element, [its fundamental in Hz per fit run]) of the first periodic effect of ``effs``
     ([(cand, X0, fe)]) whose fundamental lies within :data:`ON_LINE` of the mode ``f_t`` in
@@ -308,8 +314,7 @@ def line_under_mode(d, effs, f_t):
     of seeds 30-58 was claimed on a line); runs at two line speeds move the line off a shaft's
     fixed mode, so there the test fails and the mode stands."""
     for cand, _X0, _fe in effs:
-        fs = [c.freq.get(cand.key, 0.0) * (1.0 + c.kappa.get(cand.key, 0.0))
-              for c in d.fit_ctx() if d.orders_for(c, cand.key)]
+        fs = [_line_hz(c, cand) for c in d.fit_ctx() if d.orders_for(c, cand.key)]
         if fs and all(f > 0 and abs(f_t / f - 1.0) <= ON_LINE for f in fs):
             return cand.element, fs
     return None
