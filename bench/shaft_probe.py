@@ -40,8 +40,9 @@ import numpy as np
 import yaml
 
 from webline.diagnosis import benchmark as B
-from webline.diagnosis import calibrate, candidates, estimate, layout_edit, others, ripple, tolerances
+from webline.diagnosis import calibrate, candidates, estimate, others, ripple, tolerances
 from webline.diagnosis import runs as R
+from webline.diagnosis.layout_edit import with_sets
 from webline.diagnosis.line_model import LineModel
 from webline.orchestrator import units
 
@@ -65,12 +66,6 @@ def is_form(key):
     """A set key of the truth that changes the model's form, not a parameter."""
     return (key.startswith("web.damping") or key.startswith("sensors.") or "feedforward" in key
             or "current_lag" in key)
-
-
-def with_sets(doc, sets):
-    for k, v in sets.items():
-        doc = layout_edit.with_set(doc, k, v)
-    return doc
 
 
 class Probe:

@@ -1163,7 +1163,7 @@ def calibrated(d, noise, specs, memo=None):
     cal = calibrate.Calibration(d.model, c.run, sets, [sp[0] for sp in specs], list(c.sensors), speed,
                                 shaft=(spec, ft), form=b1["form"])
     G = calibrate.responses(d.model, c.run, cal.doc(np.log([b1["scales"][n] for n in cal.names])),
-                            [sp[0] for sp in specs], list(c.sensors), f, speed)
+                            [sp[0] for sp in specs], list(c.sensors), f, speed, band)
     _, levels, (Gx, R) = calibrate.misfit(P, G, S0, f, band)
     explained, shares = ripple_shares(P, Gx, R, levels, sensor, (f >= band[0]) & (f <= band[1]))
     explained, own = explained or 0.0, shares[spec[0]]

@@ -75,6 +75,14 @@ def with_set(doc, key, value):
     return doc
 
 
+def with_sets(doc, sets):
+    """Copy of ``doc`` with every dotted entry of ``sets`` written, in order: :func:`with_set`
+    for many entries with one copy of the document."""
+    doc = copy.deepcopy(doc)
+    doc.setdefault("set", {}).update(sets)
+    return doc
+
+
 def _wrap(x):
     return (x + math.pi) % (2 * math.pi) - math.pi
 

@@ -121,6 +121,30 @@ def test_calibration_at_zero_is_the_layout_with_the_nominal_lag(line):
     assert "drive" in calibrate.resolved(model, doc["set"])["drives"]["speed_loops"][specs[1][0]]
 
 
+def test_responses_solved_in_the_band_are_those_a_fit_over_the_band_reads(line):
+    """Solving the line only where a fit over the band reads it (the band's bins and the fine
+    view's neighbours) gives the same values there as solving every bin, and the same misfit."""
+    model, run, specs = line
+    drives = [sp[0] for sp in specs]
+    doc = calibrate.Calibration(model, run, {}, drives, SENSORS, SPEED,
+                                shaft=(specs[1], 9.0)).doc(np.full(7, 0.1))
+    f = np.arange(0.0, FS / 2 + 1e-9, 0.25)
+    band = calibrate.BAND_HZ
+    full = calibrate.responses(model, run, doc, drives, SENSORS, f, SPEED)
+    part = calibrate.responses(model, run, doc, drives, SENSORS, f, SPEED, band)
+    m = (f >= band[0]) & (f <= band[1])
+    for e in drives:
+        for s in SENSORS:
+            assert np.array_equal(part[e][s][m], full[e][s][m]), (e, s)
+            assert full[e][s][m].min() > 0
+            assert not part[e][s][f > band[1] + 1.0].any()   # nothing solved beyond the reach
+    P = {s: sum(full[e][s] for e in drives) * 1.5 + 1e-4 for s in SENSORS}
+    S0 = {s: 1e-4 for s in SENSORS}
+    assert calibrate.misfit(P, part, S0, f, band)[0] == calibrate.misfit(P, full, S0, f, band)[0]
+    assert calibrate.in_reach(f, (300.0, 400.0)) == (0, 0)
+    assert calibrate.in_reach(f, None) == (0, len(f))
+
+
 def _res(rigid, best, element="sw_leader"):
     return {"band_hz": [4.0, 24.0], "rigid": {"misfit": rigid},
             "shafts": [{"element": element, "torsional_hz": 7.0, "misfit": best}], "ratio": rigid / best}
