@@ -72,7 +72,7 @@ def in_reach(f, band):
     """(first, end) indices of the bins of ``f`` a fit over ``band`` reads through the fine
     view (:func:`ripple.fine`: each bin's neighbours too); all of ``f`` without a band. The
     Welch grid runs to the Nyquist frequency and a band holds a few per cent of it: solving
-    the line only there made a calibrated fit's linearisation about 3 x cheaper."""
+    the line only there made a calibrated fit's step 2-3 x cheaper (docs/diagnose.md)."""
     if band is None:
         return 0, len(f)
     idx = np.flatnonzero((f >= band[0]) & (f <= band[1]))
