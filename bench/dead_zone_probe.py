@@ -31,9 +31,10 @@ import numpy as np
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from shaft_probe import SENSORS, with_sets  # noqa: E402
+from shaft_probe import SENSORS  # noqa: E402
 
 from webline.diagnosis import backlash  # noqa: E402
+from webline.diagnosis.layout_edit import with_sets  # noqa: E402
 from webline.diagnosis import runs as R  # noqa: E402
 from webline.diagnosis.line_model import LineModel  # noqa: E402
 from webline.orchestrator import units  # noqa: E402

@@ -63,7 +63,7 @@ def responses(model, run, doc, drives, sensors, f, speed, band=None):
     lo, hi = in_reach(f, band)
     T = np.zeros((len(f), len(lin.outputs), len(drives)), complex)
     # not at 0 Hz: a shaft's twist is an integrator there; every drive in one solve
-    T[lo:hi] = lin.transfer(np.maximum(f, f[1])[lo:hi], [f"{e}.tau" for e in drives])
+    T[lo:hi] = lin.transfer(np.maximum(f[lo:hi], f[1]), [f"{e}.tau" for e in drives])
     return {e: {s: ripple.fine(np.abs(T[:, lin.outputs.index(s), j]) ** 2, f) for s in sensors}
             for j, e in enumerate(drives)}
 

@@ -100,17 +100,14 @@ def parameter_candidates(d):
     EA = meta.get("web", {}).get("EA")
     if EA:
         def ea(doc, f, EA=EA):
-            doc = layout_edit.with_set(doc, "web.E", None)
-            return layout_edit.with_set(doc, "web.EA", f"{EA * f:.6g} N")
+            return layout_edit.with_sets(doc, {"web.E": None, "web.EA": f"{EA * f:.6g} N"})
         out.append(("EA", ea, {"EA": (EA, "N")}))
     path = base.get("path", [])
     fr = [(e["name"], _q(e.get("friction", 0.0), "rot_damping")) for e in path]
     if any(b > 0 for _, b in fr):
         def friction(doc, f, fr=fr):
-            for name, b in fr:
-                if b > 0:
-                    doc = layout_edit.with_set(doc, f"path.{name}.friction", f"{b * f:.6g} N*m*s/rad")
-            return doc
+            return layout_edit.with_sets(doc, {f"path.{name}.friction": f"{b * f:.6g} N*m*s/rad"
+                                               for name, b in fr if b > 0})
         out.append(("friction", friction, {n: (b, "N*m*s/rad") for n, b in fr}))
     J = {}
     for c in d.system0.components:
@@ -120,29 +117,28 @@ def parameter_candidates(d):
             J[c.element] = ("core_inertia", c.parameters["J_core"])
     if J:
         def inertia(doc, f, J=J):
+            sets = {}
             for name, (key, j) in J.items():
-                if key == "inertia":
-                    doc = layout_edit.with_set(doc, f"path.{name}.mass", None)
-                doc = layout_edit.with_set(doc, f"path.{name}.{key}", f"{j * f:.6g} kg*m^2")
-            return doc
+                if key == "inertia":   # an idler's inertia replaces the mass it was derived from
+                    sets[f"path.{name}.mass"] = None
+                sets[f"path.{name}.{key}"] = f"{j * f:.6g} kg*m^2"
+            return layout_edit.with_sets(doc, sets)
         out.append(("inertia", inertia, {n: (j, "kg*m^2") for n, (_, j) in J.items()}))
     tl = base.get("drives", {}).get("tension_loops", {}) or {}
     if tl:
         K = {z: _q(v["K"], "tension_gain") for z, v in tl.items()}
 
         def tgain(doc, f, K=K):
-            for z, k in K.items():
-                doc = layout_edit.with_set(doc, f"drives.tension_loops.{z}.K", f"{k * f:.6g} (m/s)/N")
-            return doc
+            return layout_edit.with_sets(doc, {f"drives.tension_loops.{z}.K": f"{k * f:.6g} (m/s)/N"
+                                               for z, k in K.items()})
         out.append(("tension_gain", tgain, {z: (k, "(m/s)/N") for z, k in K.items()}))
     sl = base.get("drives", {}).get("speed_loops", {}) or {}
     if sl:
         Kr = {x: _q(v["K_ref"], "rate") for x, v in sl.items()}
 
         def sgain(doc, f, Kr=Kr):
-            for x, k in Kr.items():
-                doc = layout_edit.with_set(doc, f"drives.speed_loops.{x}.K_ref", f"{k * f:.6g} 1/s")
-            return doc
+            return layout_edit.with_sets(doc, {f"drives.speed_loops.{x}.K_ref": f"{k * f:.6g} 1/s"
+                                               for x, k in Kr.items()})
         out.append(("speed_gain", sgain, {x: (k, "1/s") for x, k in Kr.items()}))
     return out
 

@@ -36,9 +36,7 @@ def line(tmp_path_factory):
 
 
 def _spectrum(model, run, specs, sets, shaft=None):
-    doc = model.copy_doc()
-    for k, v in sets.items():
-        doc = layout_edit.with_set(doc, k, v)
+    doc = layout_edit.with_sets(model.doc, sets)
     if shaft:
         doc = others._drive_doc(doc, next(sp for sp in specs if sp[0] == shaft[0]), shaft[1], 0.0)
     f = np.arange(0.0, FS / 2 + 1e-9, 0.25)
