@@ -727,6 +727,7 @@ def html_report(d, rep):
     import matplotlib.pyplot as plt
     from webline.diagnosis import spectra
     from webline.diagnosis.estimate import split_slow_periodic
+    from webline.orchestrator.plot import envelope
 
     e = html.escape
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>webline diagnose</title>"
@@ -876,9 +877,9 @@ def html_report(d, rep):
             nom = c.nominal.columns[s]
             ref = last["sims"][c.name].columns[s]
             fig, ax = plt.subplots(2, 1, figsize=(10, 5.5))
-            ax[0].plot(c.t, c.meas[s], lw=0.6, label="measured", color="k")
-            ax[0].plot(c.t, nom, lw=1.0, label="nominal", color="tab:blue")
-            ax[0].plot(c.t, ref, lw=0.8, label="refined", color="tab:red")
+            ax[0].plot(*envelope(c.t, c.meas[s]), lw=0.6, label="measured", color="k")
+            ax[0].plot(*envelope(c.t, nom), lw=1.0, label="nominal", color="tab:blue")
+            ax[0].plot(*envelope(c.t, ref), lw=0.8, label="refined", color="tab:red")
             ax[0].set_ylabel(f"{s} (N)")
             ax[0].legend(loc="upper right", fontsize=8)  # "best" scans every vertex: seconds a plot
             ax[0].set_title(f"run {c.name}: {s}")
@@ -895,13 +896,14 @@ def html_report(d, rep):
             # spectra
             fig, ax = plt.subplots(1, 1, figsize=(10, 3.8))
             m = c.mask
+            fams = {k.element: c.freq[k.key] for k in d.cands if c.freq[k.key] > 0}
+            fmax = min(0.45 * c.fs, (d.opt.harmonics + 1) * max(fams.values())) if fams else 0.45 * c.fs
             for y, lab, col in ((c.meas[s], "measured", "k"), (c.meas[s] - nom, "residual nominal", "tab:blue"),
                                 (c.meas[s] - ref, "residual refined", "tab:red")):
                 p = split_slow_periodic(y, c.fs, c.fc)[1][m]
                 f, amp = spectra.amplitude_spectrum(p, c.fs)
-                ax.semilogy(f, np.maximum(amp, 1e-9), lw=0.7, label=lab, color=col)
-            fams = {k.element: c.freq[k.key] for k in d.cands if c.freq[k.key] > 0}
-            fmax = min(0.45 * c.fs, (d.opt.harmonics + 1) * max(fams.values())) if fams else 0.45 * c.fs
+                shown = f <= fmax   # the axis ends there: the rest would be drawn and clipped
+                ax.semilogy(*envelope(f[shown], np.maximum(amp[shown], 1e-9)), lw=0.7, label=lab, color=col)
             ax.set_xlim(0, fmax)
             for pk in rep["where"][c.name]["sensors"][s]["peaks"][:12]:
                 lab = (f"{pk['element']}×{pk['order']}" if pk["status"] == "tagged"
