@@ -83,11 +83,26 @@ def main(argv=None):
         print(f"webline diagnose: {exc}", file=sys.stderr)
         return 2
     except SimulationFailed as exc:
-        print(f"webline diagnose: {exc}", file=sys.stderr)
+        print(f"webline diagnose: {exc}{_kept(exc)}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt as exc:
+        print(f"webline diagnose: interrupted in stage '{getattr(exc, 'stage', None)}'{_kept(exc)}", file=sys.stderr)
+        return 130
+    except Exception as exc:
+        # the command line's last line of defence names the error; say first what was kept
+        kept = _kept(exc)
+        if kept:
+            print(f"webline diagnose: stopped in stage '{getattr(exc, 'stage', None)}'{kept}", file=sys.stderr)
+        raise
     print(rep["verdict"])
     print(f"report: {args.out / 'report.html'}")
     return 0
+
+
+def _kept(exc):
+    """"; what the stages before it had measured: <path>" when the stop left a partial report."""
+    path = getattr(exc, "partial_report", None)
+    return f"; what the stages before it had measured: {path}" if path else ""
 
 
 if __name__ == "__main__":

@@ -283,6 +283,7 @@ class Diagnosis:
     # ---------------------------------------------------------------- driver ----
     def run(self):
         t_all = _time.perf_counter()
+        self.stage = None
         try:
             self._stage("runs", self.load)
             self._stage("nominal", self.simulate_nominal)
@@ -294,13 +295,31 @@ class Diagnosis:
             self._stage("refine", self.refine)
             if self.opt.confirm and self.model.engine == "fast":
                 self._stage("confirm", self.confirm)
+        except BaseException as exc:   # Ctrl-C too: keep what the stages before had measured
+            self._keep_partial(exc)
+            raise
         finally:
             if hasattr(self, "model"):
                 self.model.cleanup()
         self.timings["total"] = _time.perf_counter() - t_all
-        return self.report()
+        self.stage = "report"
+        try:
+            return self.report()
+        except BaseException as exc:
+            self._keep_partial(exc)
+            raise
+
+    def _keep_partial(self, exc):
+        """On a stop after the runs were read (not bad input): write what the stages before
+        had measured (:mod:`diagnosis.partial`) and tell the caller where, on ``exc``."""
+        if isinstance(exc, DiagnoseError) or self.stage in (None, "runs"):
+            return
+        from webline.diagnosis import partial
+        exc.partial_report = partial.write(self, self.stage, exc)
+        exc.stage = self.stage
 
     def _stage(self, name, fn):
+        self.stage = name
         log.info("stage %s ...", name)
         t = _time.perf_counter()
         fn()

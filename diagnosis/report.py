@@ -103,6 +103,8 @@ def build(d):
         out.mkdir(parents=True, exist_ok=True)
         (out / "report.json").write_text(json.dumps(_clean(rep), indent=1, allow_nan=False))
         (out / "report.html").write_text(html_report(d, rep))
+        from webline.diagnosis import partial
+        partial.remove(out)
     return _clean(rep)
 
 

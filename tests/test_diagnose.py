@@ -154,3 +154,44 @@ def test_bad_input_exits_2(line, tmp_path, case, capsys):
     assert diagnose([layout, tmp_path / "run.yaml", "--out", tmp_path / "out"]) == 2
     err = capsys.readouterr().err
     assert "webline diagnose:" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("stop", ["interrupt", "crash"])
+def test_a_stopped_diagnosis_keeps_what_it_had_measured(line, tmp_path, monkeypatch, capsys, stop):
+    """Ctrl-C or an internal error in the refinement (its longest stage): report_partial.json
+    holds the gap and the periodic screen's find, each candidate marked unchecked, and the
+    message names the file; a later full run in the same folder removes it."""
+    from webline.diagnosis import pipeline
+    d, fmus = line
+    fit_run, f_true = make_run(tmp_path, "r200", d / "line.yaml", fmus, "200 ft/min", HIDDEN, seed=1)
+    out = tmp_path / "out"
+    refine = pipeline.Diagnosis.refine
+
+    def stopped(self):
+        if stop == "interrupt":
+            raise KeyboardInterrupt
+        raise RuntimeError("a bug deep in the refinement")
+
+    monkeypatch.setattr(pipeline.Diagnosis, "refine", stopped)
+    if stop == "interrupt":
+        assert diagnose([d / "line.yaml", fit_run, "--out", out]) == 130
+    else:
+        with pytest.raises(RuntimeError):   # the command line's last line of defence prints it
+            diagnose([d / "line.yaml", fit_run, "--out", out])
+    err = capsys.readouterr().err
+    assert "stage 'refine'" in err and str(out / "report_partial.json") in err and "Traceback" not in err
+    part = json.loads((out / "report_partial.json").read_text())
+    assert part["complete"] is False and part["stopped"]["stage"] == "refine"
+    assert ("interrupted" if stop == "interrupt" else "RuntimeError: a bug deep") in part["stopped"]["reason"]
+    assert part["stages_done"] == ["runs", "nominal", "where", "which", "estimate", "other effects"]
+    assert part["checked_effects"] is None and "not effects" in part["statement"]
+    assert part["where"]["r200"]["sensors"]["lc.T"]["rms"] > 0
+    top = part["candidates"][0]
+    assert (top["element"], top["kind"], top["checked"], top["stage"]) == ("idler1", "eccentricity", False, "estimate")
+    assert abs(top["fundamental_hz"]["r200"] - f_true) / f_true < 0.02
+    assert abs(top["run_out_m"]["1"] - 60e-6) < 10e-6          # the hidden first harmonic, as estimated
+    assert not (out / "report.json").exists()
+    if stop == "interrupt":
+        monkeypatch.setattr(pipeline.Diagnosis, "refine", refine)
+        assert diagnose([d / "line.yaml", fit_run, "--out", out, "--no-confirm"]) == 0
+        assert (out / "report.json").exists() and not (out / "report_partial.json").exists()
