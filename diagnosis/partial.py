@@ -24,7 +24,7 @@ FILE = "report_partial.json"
 def reason(exc):
     """One line naming why the diagnosis stopped."""
     if isinstance(exc, KeyboardInterrupt):
-        return "interrupted (KeyboardInterrupt)"
+        return "interrupted"
     text = (str(exc).splitlines() or [""])[0]
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
