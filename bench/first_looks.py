@@ -7,6 +7,7 @@ files, nothing else: the table is what was measured, seed after seed, on data
 the diagnosis had never seen.
 
     python bench/first_looks.py            # markdown table on stdout
+    python bench/first_looks.py --by-kind [--last N]   # finds and misses per hidden kind
 """
 import glob
 import json
@@ -80,12 +81,62 @@ def table(rs):
     return "\n".join(out)
 
 
+KINDS = ("eccentricity", "out_of_round", "compliance", "backlash")
+
+
+def by_kind(folder=HERE, last=None):
+    """Per hidden kind over the first looks (the ``last`` N seeds, or all): hidden, of them
+    detectable (the benchmark's measure: truth with and without the effect), found (a
+    match on element and kind), found of the detectable, and false claims of that kind."""
+    paths = sorted(glob.glob(os.path.join(folder, "diagnosis_results_seed*_first.json")),
+                   key=lambda p: int(os.path.basename(p).split("seed")[1].split("_")[0]))
+    paths = paths[-last:] if last else paths
+    count = {k: dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0) for k in KINDS}
+    seeds = []
+    for p in paths:
+        with open(p) as fh:
+            fam = json.load(fh)["families"]["independent"]
+        seeds.append(fam["meta"]["seed"])
+        for case in fam["cases"]:
+            score = case.get("score") or {}
+            found = {(m["element"], m["kind"]) for m in score.get("matches", [])}
+            for e in case["truth"]["effects"]:
+                c = count.setdefault(e["kind"], dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0))
+                det = bool((e.get("detectable") or {}).get("detectable"))
+                hit = (e["element"], e["kind"]) in found
+                c["hidden"] += 1
+                c["detectable"] += det
+                c["found"] += hit
+                c["found_detectable"] += hit and det
+            for f in score.get("false", []):
+                count.setdefault(f["kind"], dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0))
+                count[f["kind"]]["false"] += 1
+    return seeds, count
+
+
+def kind_table(folder=HERE, last=None):
+    seeds, count = by_kind(folder, last)
+    out = [f"Seeds {min(seeds)}-{max(seeds)} ({len(seeds)} first looks), by hidden kind:", "",
+           "| kind | hidden | found | detectable | found of the detectable | false claims |",
+           "|---|---|---|---|---|---|"]
+    for k, c in count.items():
+        out.append(f"| {k} | {c['hidden']} | {c['found']} ({_pct(c['found'] / c['hidden'] if c['hidden'] else None)}) "
+                   f"| {c['detectable']} | {c['found_detectable']} "
+                   f"({_pct(c['found_detectable'] / c['detectable'] if c['detectable'] else None)}) | {c['false']} |")
+    return "\n".join(out)
+
+
 def main(argv=None):
-    folder = (argv or sys.argv[1:] or [HERE])[0]
-    rs = rows(folder)
+    import argparse
+    ap = argparse.ArgumentParser(description="Every blind first look of the independent benchmark.")
+    ap.add_argument("folder", nargs="?", default=HERE)
+    ap.add_argument("--by-kind", action="store_true", help="finds and misses per hidden kind instead")
+    ap.add_argument("--last", type=int, default=None, help="with --by-kind: the last N seeds only")
+    args = ap.parse_args(argv)
+    rs = rows(args.folder)
     if not rs:
-        sys.exit(f"no diagnosis_results_seed*_first.json in {folder}")
-    print(table(rs))
+        sys.exit(f"no diagnosis_results_seed*_first.json in {args.folder}")
+    print(kind_table(args.folder, args.last) if args.by_kind else table(rs))
 
 
 if __name__ == "__main__":
