@@ -47,3 +47,28 @@ def test_the_committed_first_looks_read():
     fl = _module()
     rs = fl.rows()
     assert rs and all(r["cases"] == 24 and 0.0 <= r["precision"] <= 1.0 for r in rs)
+
+
+def test_by_kind_counts_finds_detectable_and_false_claims(tmp_path):
+    fl = _module()
+
+    def eff(el, kind, det):
+        return {"element": el, "kind": kind, "detectable": {"detectable": det}}
+
+    cases = [{"truth": {"effects": [eff("idler_u1", "eccentricity", True), eff("sw_leader", "compliance", True)]},
+              "score": {"matches": [{"element": "idler_u1", "kind": "eccentricity"}],
+                        "false": [{"element": "unwind", "kind": "compliance"}]}},
+             {"truth": {"effects": [eff("rewind", "backlash", False)]}, "score": {"matches": [], "false": []}},
+             {"truth": {"effects": []}, "score": {}}]
+    for seed in (3, 12):
+        fam = {"meta": {"seed": seed}, "target_scores": {}, "cases": cases}
+        with open(tmp_path / f"diagnosis_results_seed{seed}_first.json", "w") as fh:
+            json.dump({"families": {"independent": fam}}, fh)
+    seeds, count = fl.by_kind(str(tmp_path))
+    assert seeds == [3, 12]
+    assert count["eccentricity"] == dict(hidden=2, detectable=2, found=2, found_detectable=2, false=0)
+    assert count["compliance"] == dict(hidden=2, detectable=2, found=0, found_detectable=0, false=2)
+    assert count["backlash"] == dict(hidden=2, detectable=0, found=0, found_detectable=0, false=0)
+    assert fl.by_kind(str(tmp_path), last=1)[0] == [12]                    # seeds in numeric order, not text
+    text = fl.kind_table(str(tmp_path))
+    assert "| compliance | 2 | 0 (0 %) | 2 | 0 (0 %) | 2 |" in text and "| backlash | 2 | 0 (0 %) | 0 | 0 (-) | 0 |" in text
