@@ -84,6 +84,10 @@ def table(rs):
 KINDS = ("eccentricity", "out_of_round", "compliance", "backlash")
 
 
+def _zero():
+    return dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0)
+
+
 def by_kind(folder=HERE, last=None):
     """Per hidden kind over the first looks (the ``last`` N seeds, or all): hidden, of them
     detectable (the benchmark's measure: truth with and without the effect), found (a
@@ -91,7 +95,7 @@ def by_kind(folder=HERE, last=None):
     paths = sorted(glob.glob(os.path.join(folder, "diagnosis_results_seed*_first.json")),
                    key=lambda p: int(os.path.basename(p).split("seed")[1].split("_")[0]))
     paths = paths[-last:] if last else paths
-    count = {k: dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0) for k in KINDS}
+    count = {k: _zero() for k in KINDS}
     seeds = []
     for p in paths:
         with open(p) as fh:
@@ -101,7 +105,7 @@ def by_kind(folder=HERE, last=None):
             score = case.get("score") or {}
             found = {(m["element"], m["kind"]) for m in score.get("matches", [])}
             for e in case["truth"]["effects"]:
-                c = count.setdefault(e["kind"], dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0))
+                c = count.setdefault(e["kind"], _zero())
                 det = bool((e.get("detectable") or {}).get("detectable"))
                 hit = (e["element"], e["kind"]) in found
                 c["hidden"] += 1
@@ -109,8 +113,7 @@ def by_kind(folder=HERE, last=None):
                 c["found"] += hit
                 c["found_detectable"] += hit and det
             for f in score.get("false", []):
-                count.setdefault(f["kind"], dict(hidden=0, detectable=0, found=0, found_detectable=0, false=0))
-                count[f["kind"]]["false"] += 1
+                count.setdefault(f["kind"], _zero())["false"] += 1
     return seeds, count
 
 
@@ -133,10 +136,10 @@ def main(argv=None):
     ap.add_argument("--by-kind", action="store_true", help="finds and misses per hidden kind instead")
     ap.add_argument("--last", type=int, default=None, help="with --by-kind: the last N seeds only")
     args = ap.parse_args(argv)
-    rs = rows(args.folder)
-    if not rs:
+    if not glob.glob(os.path.join(args.folder, "diagnosis_results_seed*_first.json")):
         sys.exit(f"no diagnosis_results_seed*_first.json in {args.folder}")
-    print(kind_table(args.folder, args.last) if args.by_kind else table(rs))
+    # each view reads the files itself: --by-kind reads every case, the table each file's summary
+    print(kind_table(args.folder, args.last) if args.by_kind else table(rows(args.folder)))
 
 
 if __name__ == "__main__":

@@ -44,10 +44,11 @@ def envelope(x, y, bins=ENVELOPE_BINS):
     m = n // bins
     body = y[:m * bins].reshape(bins, m)
     start = np.arange(bins) * m
-    gaps = np.isnan(body)
+    nan = np.isnan(y)
+    gaps = nan[:m * bins].reshape(bins, m)
     keep = [start + np.argmin(np.where(gaps, np.inf, body), axis=1),
             start + np.argmax(np.where(gaps, -np.inf, body), axis=1),
-            start, start + m - 1, np.flatnonzero(np.isnan(y)), np.arange(m * bins, n)]
+            start, start + m - 1, np.flatnonzero(nan), np.arange(m * bins, n)]
     idx = np.unique(np.concatenate([np.asarray(k, dtype=np.intp) for k in keep]))
     return x[idx], y[idx]
 
