@@ -116,8 +116,7 @@ def nb():
     f = {}
     f["tension_rate"] = _jit(span.tension_rate)
     f["kelvin_voigt_tension"] = _jit(span.kelvin_voigt_tension)
-    f["length_offset"] = _jit(eccentricity.length_offset)
-    f["length_rate"] = _jit(eccentricity.length_rate)
+    f["length_terms"] = _jit(eccentricity.length_terms)
     f["roller_acceleration"] = _jit(roller.roller_acceleration)
     f["wound_inertia"] = _jit(material_roll.wound_inertia)
     f["inertia"] = _jit(material_roll.inertia, wound_inertia=f["wound_inertia"])
@@ -434,10 +433,11 @@ class _Span(_Gen):
         self.mode = m.length_mode
         self.ecc_up = self.mode != 1 and not m.round_up
         self.ecc_dn = self.mode != 1 and not m.round_down
+        # the series in sine-cosine form (eccentricity.length_terms): no trigonometry of the phases per step
         if self.ecc_up:
-            self.C_up, self.psi_up = self.Parray("C_up", m.C_up), self.Parray("psi_up", m.psi_up)
+            self.a_up, self.b_up = (self.Parray(n, v) for n, v in zip(("a_up", "b_up"), m.ab_up))
         if self.ecc_dn:
-            self.C_dn, self.psi_dn = self.Parray("C_down", m.C_down), self.Parray("psi_down", m.psi_down)
+            self.a_dn, self.b_dn = (self.Parray(n, v) for n, v in zip(("a_down", "b_down"), m.ab_down))
         if self.mode == 2:
             self.f_fixed = self.P("f_fixed", m.f_fixed)
         self.damping = getattr(m, "damping_time", 0.0) != 0.0
@@ -455,12 +455,14 @@ class _Span(_Gen):
                 th = self.tmp(body, "th_up", lambda: f"{w} * t")
             else:
                 th, w = self.u(body, "theta_up"), self.u(body, "omega_up")
-            L.append(self.tmp(body, "L_up", lambda: f"length_offset({th}, {self.C_up}, {self.psi_up})"))
-            up = self.tmp(body, "dL_up", lambda: f"length_rate({th}, {w}, {self.C_up}, {self.psi_up})")
+            ecc = self.tmp(body, "ecc_up", lambda: f"length_terms({th}, {w}, {self.a_up}, {self.b_up})")
+            L.append(self.tmp(body, "L_up", lambda: f"{ecc}[0]"))
+            up = self.tmp(body, "dL_up", lambda: f"{ecc}[1]")
         if self.ecc_dn:
             th, w = self.u(body, "theta_down"), self.u(body, "omega_down")
-            L.append(self.tmp(body, "L_dn", lambda: f"length_offset({th}, {self.C_dn}, {self.psi_dn})"))
-            dn = self.tmp(body, "dL_dn", lambda: f"length_rate({th}, {w}, {self.C_dn}, {self.psi_dn})")
+            ecc = self.tmp(body, "ecc_dn", lambda: f"length_terms({th}, {w}, {self.a_dn}, {self.b_dn})")
+            L.append(self.tmp(body, "L_dn", lambda: f"{ecc}[0]"))
+            dn = self.tmp(body, "dL_dn", lambda: f"{ecc}[1]")
         return self.tmp(body, "L", lambda: " + ".join(L)), up, dn
 
     def rate(self, body):

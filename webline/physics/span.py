@@ -8,7 +8,7 @@ dL_down the lengthening caused by the downstream one (x_i increasing).
 """
 import math
 
-from webline.physics.eccentricity import length_offset, length_rate
+from webline.physics.eccentricity import length_terms, sine_cosine_form
 from webline.physics.element import ElementModel, require_positive
 
 
@@ -83,6 +83,8 @@ class SpanModel(ElementModel):
         # Most spans have round rollers at both ends: skip their Fourier sums.
         self.round_up = not any(self.C_up)
         self.round_down = not any(self.C_down)
+        self.ab_up = sine_cosine_form(self.C_up, self.psi_up)
+        self.ab_down = sine_cosine_form(self.C_down, self.psi_down)
 
     def problems(self):
         p = require_positive([], EA=self.EA, L0=self.L0)
@@ -110,11 +112,11 @@ class SpanModel(ElementModel):
             th_up = w_up * t
         L, up, dn = self.L0, 0.0, 0.0
         if not self.round_up:
-            L += length_offset(th_up, self.C_up, self.psi_up)
-            up = length_rate(th_up, w_up, self.C_up, self.psi_up)
+            off, up = length_terms(th_up, w_up, *self.ab_up)
+            L += off
         if not self.round_down:
-            L += length_offset(th_dn, self.C_down, self.psi_down)
-            dn = length_rate(th_dn, w_dn, self.C_down, self.psi_down)
+            off, dn = length_terms(th_dn, w_dn, *self.ab_down)
+            L += off
         return L, up, dn
 
     def derivatives(self, t, x, u):
