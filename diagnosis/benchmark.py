@@ -560,19 +560,49 @@ def run_diagnosis(truth, out, timeout=1800, python=None, extra=()):
         env["PYTHONPATH"] = str(REPO) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     t0 = time.perf_counter()
     cpu0 = _children_cpu()
-    try:
-        p = subprocess.run(argv, cwd=blind, env=env, capture_output=True, text=True, timeout=timeout)
-        rc, err = p.returncode, p.stderr
-    except subprocess.TimeoutExpired as exc:
-        rc, err = -9, f"timeout after {timeout} s\n{exc.stderr or ''}"
+    rc, err = _run_with_timeout(argv, blind, env, timeout)
     wall = time.perf_counter() - t0
     cpu = _children_cpu() - cpu0
     rep = None
     rp = Path(out) / "report.json"
     if rc == 0 and rp.exists():
         rep = json.loads(rp.read_text())
-    return {"report": rep, "wall_s": wall, "cpu_s": cpu, "returncode": rc, "stderr": (err or "")[-3000:],
+    out_ = {"report": rep, "wall_s": wall, "cpu_s": cpu, "returncode": rc, "stderr": (err or "")[-3000:],
             "argv": argv}
+    partial = Path(out) / "report_partial.json"
+    if rep is None and partial.exists():
+        # what a stopped diagnosis had measured (diagnosis.partial): named, never scored
+        try:
+            doc = json.loads(partial.read_text())
+            out_["partial"] = {"file": str(partial), "stage": doc.get("stopped", {}).get("stage"),
+                               "stages_done": doc.get("stages_done")}
+        except (OSError, ValueError):
+            out_["partial"] = {"file": str(partial)}
+    return out_
+
+
+TIMEOUT_GRACE = 60.0   # s between the terminate signal at the time limit and the kill
+
+
+def _run_with_timeout(argv, cwd, env, timeout, grace=None):
+    """(returncode, stderr) of ``argv``; at ``timeout`` seconds it is terminated (SIGTERM, which
+    a diagnosis takes as Ctrl-C and writes what its stages had measured, report_partial.json;
+    not SIGINT, which a benchmark started in the background passes on ignored) and killed if
+    it has not stopped ``grace`` seconds later. A timed-out run returns -9."""
+    import signal
+    grace = TIMEOUT_GRACE if grace is None else grace
+    p = subprocess.Popen(argv, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _, err = p.communicate(timeout=timeout)
+        return p.returncode, err
+    except subprocess.TimeoutExpired:
+        p.send_signal(signal.SIGTERM)
+        try:
+            _, err = p.communicate(timeout=grace)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            _, err = p.communicate()
+        return -9, f"timeout after {timeout:g} s\n{err or ''}"
 
 
 def _children_cpu():
@@ -742,7 +772,8 @@ def summarize(results):
             cpus.append(res["cpu_s"])
         if res.get("report") is None:
             failed.append({"id": tr["id"], "returncode": res.get("returncode"),
-                           "stderr_tail": (res.get("stderr") or "")[-400:]})
+                           "stderr_tail": (res.get("stderr") or "")[-400:],
+                           **({"stopped_in": res["partial"].get("stage")} if res.get("partial") else {})})
         for t in tr["effects"]:
             per_kind.setdefault(t["kind"], {"true": 0, "reported": 0, "matched": 0, "exact": 0, "ambiguous": 0})
             per_kind[t["kind"]]["true"] += 1
@@ -991,6 +1022,8 @@ def markdown(summary, results=None, meta=None):
             rep = res.get("report")
             if rep is None:
                 got = f"diagnose failed (rc {res.get('returncode')})"
+                if (res.get("partial") or {}).get("stage"):
+                    got += f", stopped in stage '{res['partial']['stage']}' (report_partial.json kept)"
             else:
                 got = "; ".join(f"{e.get('element')}: {e.get('kind')}"
                                 + (f" [{', '.join(_cands(e))}]" if len(_cands(e)) > 1 else "")
@@ -1024,8 +1057,11 @@ def evaluate_case(case, root, line_doc, fmu_paths=None, timeout=1800, extra=(), 
     res = {"truth": truth, "report": rep, "wall_s": d["wall_s"], "cpu_s": d.get("cpu_s"), "generation_s": gen,
            "returncode": d["returncode"], "stderr": d["stderr"] if rep is None else "", "argv": d["argv"],
            "score": score_case(truth, rep), "gap": gap_of(rep, truth)}
+    if d.get("partial"):
+        res["partial"] = d["partial"]
     (folder / "result.json").write_text(json.dumps(
-        {k: res[k] for k in ("wall_s", "cpu_s", "generation_s", "returncode", "stderr", "argv")}, indent=1))
+        {k: res[k] for k in ("wall_s", "cpu_s", "generation_s", "returncode", "stderr", "argv", "partial")
+         if k in res}, indent=1))
     return res
 
 

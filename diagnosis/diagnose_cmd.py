@@ -8,6 +8,7 @@ Exit codes: 0 done (with or without an effect found), 1 a simulation failed,
 import argparse
 import logging
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -77,6 +78,7 @@ def main(argv=None):
                   time_column=args.time, time_unit=args.time_unit, engine=args.engine,
                   confirm=not args.no_confirm, gains=args.gains, transfer=not args.no_transfer,
                   ripple=not args.no_ripple, calibrated_shafts=args.calibrated_shafts)
+    previous = _terminate_as_interrupt()
     try:
         rep = diagnose(args.layout, args.runs, args.holdout, args.out, opt)
     except DiagnoseError as exc:
@@ -94,9 +96,25 @@ def main(argv=None):
         if kept:
             print(f"webline diagnose: stopped in stage '{getattr(exc, 'stage', None)}'{kept}", file=sys.stderr)
         raise
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     print(rep["verdict"])
     print(f"report: {args.out / 'report.html'}")
     return 0
+
+
+def _terminate_as_interrupt():
+    """SIGTERM (a job scheduler's or the benchmark's time limit, ``kill``) stops the diagnosis
+    as Ctrl-C does, so it keeps what it had measured (report_partial.json); the default would
+    end the process with nothing written. Returns the handler it replaced (None off the main
+    thread, where Python cannot set one)."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt("terminated by SIGTERM")
+    try:
+        return signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:
+        return None
 
 
 def _kept(exc):

@@ -24,7 +24,8 @@ FILE = "report_partial.json"
 def reason(exc):
     """One line naming why the diagnosis stopped."""
     if isinstance(exc, KeyboardInterrupt):
-        return "interrupted"
+        # a terminate signal arrives as an interrupt (diagnose_cmd) that names it
+        return f"interrupted ({exc.args[0]})" if exc.args else "interrupted"
     text = (str(exc).splitlines() or [""])[0]
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 

@@ -8,6 +8,9 @@ the hidden effect is the only difference between model and data.
 """
 import json
 import math
+import os
+import signal
+import time
 from pathlib import Path
 
 import numpy as np
@@ -156,7 +159,7 @@ def test_bad_input_exits_2(line, tmp_path, case, capsys):
     assert "webline diagnose:" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("stop", ["interrupt", "crash"])
+@pytest.mark.parametrize("stop", ["interrupt", "terminate", "crash"])
 def test_a_stopped_diagnosis_keeps_what_it_had_measured(line, tmp_path, monkeypatch, capsys, stop):
     """Ctrl-C or an internal error in the refinement (its longest stage): report_partial.json
     holds the gap and the periodic screen's find, each candidate marked unchecked, and the
@@ -170,10 +173,13 @@ def test_a_stopped_diagnosis_keeps_what_it_had_measured(line, tmp_path, monkeypa
     def stopped(self):
         if stop == "interrupt":
             raise KeyboardInterrupt
+        if stop == "terminate":   # a scheduler's or the benchmark's time limit
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(30)        # the handler raises here
         raise RuntimeError("a bug deep in the refinement")
 
     monkeypatch.setattr(pipeline.Diagnosis, "refine", stopped)
-    if stop == "interrupt":
+    if stop in ("interrupt", "terminate"):
         assert diagnose([d / "line.yaml", fit_run, "--out", out]) == 130
     else:
         with pytest.raises(RuntimeError):   # the command line's last line of defence prints it
@@ -182,7 +188,8 @@ def test_a_stopped_diagnosis_keeps_what_it_had_measured(line, tmp_path, monkeypa
     assert "stage 'refine'" in err and str(out / "report_partial.json") in err and "Traceback" not in err
     part = json.loads((out / "report_partial.json").read_text())
     assert part["complete"] is False and part["stopped"]["stage"] == "refine"
-    assert ("interrupted" if stop == "interrupt" else "RuntimeError: a bug deep") in part["stopped"]["reason"]
+    assert {"interrupt": "interrupted", "terminate": "interrupted (terminated by SIGTERM)",
+            "crash": "RuntimeError: a bug deep"}[stop] in part["stopped"]["reason"]
     assert part["stages_done"] == ["runs", "nominal", "where", "which", "estimate", "other effects"]
     assert part["checked_effects"] is None and "not effects" in part["statement"]
     assert part["where"]["r200"]["sensors"]["lc.T"]["rms"] > 0

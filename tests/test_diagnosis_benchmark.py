@@ -282,3 +282,43 @@ def test_summary_precision_recall_and_targets():
     assert "| eccentricity: precision | 50 % (2/4) (of which 1 ambiguous) |" in md
     assert "| invented effects on noise-only cases | 1 in 2 cases | 0 | fail |" in md
     assert len(re.findall(r"\n\| c\d ", md)) == len(cases)
+
+
+# ------------------------------------------------------------------ time limit ----
+STOPPABLE = '''#!{python}
+import json, signal, sys, time
+from pathlib import Path
+out = Path(sys.argv[sys.argv.index("--out") + 1])
+out.mkdir(parents=True, exist_ok=True)
+def term(signum, frame):
+    raise KeyboardInterrupt("terminated by SIGTERM")
+signal.signal(signal.SIGTERM, signal.SIG_IGN if {ignore} else term)
+try:
+    (out / "report_partial.json").write_text(json.dumps({{"stopped": {{"stage": "refine"}},
+                                                          "stages_done": ["runs", "nominal"]}}))
+    time.sleep(60)
+except KeyboardInterrupt:
+    sys.exit(130)
+'''
+
+
+@pytest.mark.parametrize("ignores_interrupt", [False, True])
+def test_a_diagnosis_over_its_time_is_terminated_then_killed(tmp_path, monkeypatch, ignores_interrupt):
+    # at the limit the diagnosis gets SIGTERM (it then writes what it had measured, as on
+    # Ctrl-C: diagnose_cmd), and SIGKILL only if it has not stopped within the grace period
+    blind = tmp_path / "blind"
+    blind.mkdir()
+    for name in ("line.yaml", "run1.yaml"):
+        (blind / name).write_text("{}\n")
+    fake = tmp_path / "fake_python"
+    fake.write_text(STOPPABLE.format(python=sys.executable, ignore=ignores_interrupt))
+    fake.chmod(fake.stat().st_mode | stat.S_IEXEC)
+    monkeypatch.setattr(B, "TIMEOUT_GRACE", 1.0)
+    truth = {"blind_folder": str(blind), "runs": [{"name": "run1", "holdout": False}]}
+    d = B.run_diagnosis(truth, tmp_path / "diagnosis", timeout=2.0, python=str(fake))
+    assert d["returncode"] == -9 and d["report"] is None
+    assert d["stderr"].startswith("timeout after 2 s")
+    assert d["partial"]["stage"] == "refine" and d["partial"]["stages_done"] == ["runs", "nominal"]
+    # terminated: it stops at once; ignoring the signal: killed after the grace period
+    assert d["wall_s"] < 2.0 + (1.0 if ignores_interrupt else 0.0) + 20.0
+    assert d["wall_s"] >= 2.0 + (1.0 if ignores_interrupt else 0.0)
