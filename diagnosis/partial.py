@@ -101,7 +101,7 @@ def build(d, stage, exc):
     }
     model = getattr(d, "model", None)
     if model is not None:
-        doc["simulations"] = {"count": model.n_sims, "wall_s": model.sim_wall, "reused": model.n_reused}
+        doc["simulations"] = model.stats()
     return doc
 
 

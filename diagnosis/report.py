@@ -36,8 +36,7 @@ def build(d):
                       "other": getattr(d, "other_log", [])},
         "notes": list(d.notes),
         "timings_s": d.timings,
-        "simulations": {"count": d.model.n_sims, "wall_s": d.model.sim_wall,
-                        "reused": d.model.n_reused},
+        "simulations": d.model.stats(),
     }
     from webline.diagnosis import claims, compliance, ripple
     fit = [c for c in d.ctx if c.fit]

@@ -121,6 +121,7 @@ def test_probe_responses_are_kept_after_their_simulations_are_released():
     import gc
     fs, T = 250.0, 4.0
     model = LineModel(EWL)
+    model.RECENT_BYTES = model.READ_BYTES = 0   # what is derived, not the released Sims (test_line_model_memo.py)
     exp = {"experiment.duration": f"{T} s", "experiment.output_interval": f"{1 / fs} s"}
     run = SimpleNamespace(name="a", overrides=exp, t=np.arange(0.0, T + 0.5 / fs, 1 / fs), holdout=False)
     doc = {"base": str(EWL), "set": {"web.E": "2.3e8 Pa"}}
