@@ -36,7 +36,20 @@ class SimulationFailed(RuntimeError):
     pass
 
 
-class RunColumns(Mapping):
+class _Columns(Mapping):
+    """A simulation's columns by name (``self._names``), each made when first read."""
+
+    def __contains__(self, k):
+        return k in self._names
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+
+class RunColumns(_Columns):
     """A simulation's columns on the run's time grid, interpolated when first read:
     a diagnosis reads a handful of a simulation's ~50 columns (the load cells, an
     angle, the line speed), and interpolating all of them cost more than the fast
@@ -44,6 +57,7 @@ class RunColumns(Mapping):
 
     def __init__(self, t_model, cols, t_run):
         self._t, self._raw, self._t_run, self._done = t_model, cols, t_run, {}
+        self._names = cols
 
     def __getitem__(self, k):
         v = self._done.get(k)
@@ -52,22 +66,13 @@ class RunColumns(Mapping):
             v.flags.writeable = False   # one Sim may serve several callers (LineModel.simulate_many)
         return v
 
-    def __contains__(self, k):
-        return k in self._raw
-
-    def __iter__(self):
-        return iter(self._raw)
-
-    def __len__(self):
-        return len(self._raw)
-
     @property
     def nbytes(self):
         """Bytes of the outputs as simulated (the columns read, interpolated, add a little)."""
         return int(self._t.nbytes + sum(v.nbytes for v in self._raw.values()))
 
 
-class ReadColumns(Mapping):
+class ReadColumns(_Columns):
     """The columns a simulation's callers had read (its :class:`RunColumns`' interpolated
     ones, the dict shared), after the simulation itself was dropped: a caller that asks
     for another column gets the run simulated again (``refill()``, once; the engines are
@@ -85,15 +90,6 @@ class ReadColumns(Mapping):
                 self._full = self._refill().columns
             v = self._done[k] = self._full[k]
         return v
-
-    def __contains__(self, k):
-        return k in self._names
-
-    def __iter__(self):
-        return iter(self._names)
-
-    def __len__(self):
-        return len(self._names)
 
 
 @dataclass
@@ -135,7 +131,7 @@ class LineModel:
         self.n_reused = 0
         # ... and the last ones made, released or not (:meth:`_remember`): a stage asks again
         # for simulations an earlier stage had released (seed-62 c01: 85 of 1030 asked for
-        # were made before, 12 of them still held; most repeats 64 or more simulations apart)
+        # were made before, 12 of them still held; 50 asked for more than 64 requests later)
         self._recent = collections.OrderedDict()   # key -> (Sim, bytes), the last RECENT_BYTES
         self._read = collections.OrderedDict()     # key -> what ReadColumns needs, the last READ_BYTES
         self.n_refilled = 0
@@ -203,7 +199,7 @@ class LineModel:
             self._tmp.cleanup()
             self._tmp = None
             self._written = {}
-        # the keys name the derived layouts' files, gone with them
+        # what was kept goes too (the keys name the derived layouts' files, gone with them)
         self._recent.clear()
         self._read.clear()
         if getattr(self, "_pool", None) is not None:
@@ -308,10 +304,10 @@ class LineModel:
 
         A job whose run conditions and layout match a simulation some caller still
         holds, or one of the last made (:meth:`_remember`), gets that Sim (the engines are
-        deterministic; its columns are read-only), as does a job repeated in one call. With ``self.jobs`` > 1 the simulations run
-        in worker processes (spawned: every worker loads its own FMU instances;
-        pythonfmu's module names are process-global), the pool kept for the whole
-        diagnosis."""
+        deterministic; its columns are read-only), as does a job repeated in one call.
+        With ``self.jobs`` > 1 the simulations run in worker processes (spawned: every
+        worker loads its own FMU instances; pythonfmu's module names are process-global),
+        the pool kept for the whole diagnosis."""
         jobs = list(jobs)
         # computing a key dumps the document: a caller that has them passes them
         keys = list(keys) if keys is not None else [self.memo_key(run, doc) for run, doc, _ in jobs]
