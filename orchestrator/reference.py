@@ -89,22 +89,51 @@ def instantiate(component, start_time=0.0, stop_time=None, classes=None):
     return slave
 
 
-REUSE_MAX = 2048  # instantiated slaves kept for reuse (a few kB each)
+class ModelOnly:
+    """What a reader of the models alone takes from an FMU slave: the model its class
+    builds (``model``), the inputs' start values (``input_starts``, model order) and the
+    class (``cls``: the variables' declarations)."""
+
+    __slots__ = ("cls", "model", "input_starts")
+
+    def __init__(self, cls, model, input_starts):
+        self.cls, self.model, self.input_starts = cls, model, input_starts
+
+
+def model_only(component, classes=None):
+    """:class:`ModelOnly` of ``component``: the model :func:`instantiate`'s slave builds,
+    without instantiating the FMU (``ElementSlave.model_of``); the same errors."""
+    classes = classes or fmu_classes()
+    if component.model not in classes:
+        raise KeyError(f"component {component.name!r}: no FMU script for model {component.model!r} "
+                       f"(known: {', '.join(sorted(classes))})")
+    cls = classes[component.model]
+    values = {**component.parameters, **component.inputs}
+    try:
+        model, starts = cls.model_of(values)
+    except KeyError as exc:
+        raise KeyError(f"component {component.name!r} ({component.model}) has no variable {exc.args[0]!r}") from None
+    except ValueError as exc:
+        raise ValueError(f"component {component.name!r} ({component.model}): {exc}") from None
+    return ModelOnly(cls, model, [float(starts[n]) for n in model.INPUTS])
+
+
+REUSE_MAX = 2048  # models kept for reuse (a few kB each)
 _REUSE = {}
 
 
 def _reused(component, start_time, stop_time, classes):
-    """:func:`instantiate`, or the slave made before for an equal component (model, name,
-    parameters, input starts, times). Only for readers that never step a slave or call its
+    """:func:`model_only`, or the one made before for an equal component (model, name,
+    parameters, input starts). Only for readers that never step a slave or call its
     model (the fast engine generates code from them): a diagnosis simulates hundreds of
-    variants of one line that differ in one or two components, and registering an FMU's
-    variables is most of what setting up a variant costs."""
+    variants of one line that differ in one or two components. The times are not part
+    of what a model is built from (``make_model`` reads the parameters alone)."""
+    del start_time, stop_time
     key = (component.model, component.name, tuple(sorted(component.parameters.items())),
-           tuple(sorted(component.inputs.items())), float(start_time),
-           None if stop_time is None else float(stop_time))
+           tuple(sorted(component.inputs.items())))
     slave = _REUSE.get(key)
     if slave is None:
-        slave = instantiate(component, start_time, stop_time, classes)
+        slave = model_only(component, classes)
         if len(_REUSE) >= REUSE_MAX:
             _REUSE.pop(next(iter(_REUSE)))
         _REUSE[key] = slave
@@ -115,7 +144,8 @@ def _reused(component, start_time, stop_time, classes):
 class ReferenceSystem:
     """A System compiled into one ODE ``dx/dt = rhs(t, x)`` over all models' states.
 
-    Attributes: ``names`` (component names), ``models``, ``slaves``, ``x0``
+    Attributes: ``names`` (component names), ``models``, ``slaves`` (the FMU slaves; with
+    ``reuse``, :class:`ModelOnly` records shared between systems), ``x0``
     (initial state, numpy), ``state_names`` (``<component>.<state>``),
     ``columns`` (``<component>.<output>`` for every output, in ``outputs()`` order).
     """
@@ -138,8 +168,11 @@ class ReferenceSystem:
         self.offsets = []
         x0, self.state_names = [], []
         for c, slave, model in zip(system.components, self.slaves, self.models):
-            variables = {v.name: v for v in slave.vars.values()}
-            self.u.append([float(variables[n].getter()) for n in model.INPUTS])
+            if isinstance(slave, ModelOnly):
+                self.u.append(list(slave.input_starts))
+            else:
+                variables = {v.name: v for v in slave.vars.values()}
+                self.u.append([float(variables[n].getter()) for n in model.INPUTS])
             xs = list(model.initial_state())
             if len(xs) != len(model.STATES):
                 raise ValueError(f"{c.name}: initial_state() has {len(xs)} values for STATES {model.STATES}")
@@ -149,8 +182,9 @@ class ReferenceSystem:
         self.x0 = np.array(x0, dtype=float)
         self.columns = [f"{n}.{o}" for n, m in zip(self.names, self.models) for o in m.OUTPUTS]
         self.units, self.descriptions = {}, {}
-        for n, slave in zip(self.names, self.slaves):
-            for v in type(slave).OUTPUTS:
+        declared = [s.cls if isinstance(s, ModelOnly) else type(s) for s in self.slaves]
+        for n, cls in zip(self.names, declared):
+            for v in cls.OUTPUTS:
                 self.units[f"{n}.{v.name}"] = v.unit
                 self.descriptions[f"{n}.{v.name}"] = f"{v.description} [{v.unit}]"
         self.y = [[0.0] * len(m.OUTPUTS) for m in self.models]
@@ -175,11 +209,11 @@ class ReferenceSystem:
 
         # feed-through dependencies (from the FMU declarations) -> levels of calls
         deps = {}  # (comp, out idx) -> set of (comp, out idx) it needs first
-        for ci, (slave, model) in enumerate(zip(self.slaves, self.models)):
-            declared = {v.name: v.depends for v in type(slave).OUTPUTS}
+        for ci, (cls, model) in enumerate(zip(declared, self.models)):
+            depends = {v.name: v.depends for v in cls.OUTPUTS}
             for o, name in enumerate(model.OUTPUTS):
                 needs = set()
-                for inp in declared.get(name, ()):
+                for inp in depends.get(name, ()):
                     if inp in model.INPUTS:
                         f = feeder.get((ci, model.INPUTS.index(inp)))
                         if f is not None:
