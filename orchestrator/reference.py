@@ -60,20 +60,33 @@ def fmu_classes():
     return _CLASSES
 
 
-def instantiate(component, start_time=0.0, stop_time=None, classes=None):
-    """FMU slave object of ``component`` with its parameters and input starts set and
-    initialised (its ``model`` attribute built by ``make_model()``), as an FMU host would.
-    ``classes``: :func:`fmu_classes`, if the caller already has them."""
+def _slave_class(component, classes):
+    """The FMU slave class of ``component`` (``classes``: :func:`fmu_classes` or None)."""
     classes = classes or fmu_classes()
     if component.model not in classes:
         raise KeyError(f"component {component.name!r}: no FMU script for model {component.model!r} "
                        f"(known: {', '.join(sorted(classes))})")
-    slave = classes[component.model](instance_name=component.name)
+    return classes[component.model]
+
+
+def _no_variable(component, name):
+    return KeyError(f"component {component.name!r} ({component.model}) has no variable {name!r}")
+
+
+def _bad_parameters(component, exc):
+    return ValueError(f"component {component.name!r} ({component.model}): {exc}")
+
+
+def instantiate(component, start_time=0.0, stop_time=None, classes=None):
+    """FMU slave object of ``component`` with its parameters and input starts set and
+    initialised (its ``model`` attribute built by ``make_model()``), as an FMU host would.
+    ``classes``: :func:`fmu_classes`, if the caller already has them."""
+    slave = _slave_class(component, classes)(instance_name=component.name)
     variables = {v.name: v for v in slave.vars.values()}
     for group in (component.parameters, component.inputs):
         for name, value in group.items():
             if name not in variables:
-                raise KeyError(f"component {component.name!r} ({component.model}) has no variable {name!r}")
+                raise _no_variable(component, name)
             setter = variables[name].setter
             if setter is None:
                 raise KeyError(f"variable {component.name}.{name} cannot be set")
@@ -83,7 +96,7 @@ def instantiate(component, start_time=0.0, stop_time=None, classes=None):
     try:
         slave.exit_initialization_mode()  # checks parameters (ValueError naming them), builds the model
     except ValueError as exc:
-        raise ValueError(f"component {component.name!r} ({component.model}): {exc}") from None
+        raise _bad_parameters(component, exc) from None
     if slave.model is None:
         raise RuntimeError(f"component {component.name!r}: the FMU built no model")
     return slave
@@ -103,18 +116,13 @@ class ModelOnly:
 def model_only(component, classes=None):
     """:class:`ModelOnly` of ``component``: the model :func:`instantiate`'s slave builds,
     without instantiating the FMU (``ElementSlave.model_of``); the same errors."""
-    classes = classes or fmu_classes()
-    if component.model not in classes:
-        raise KeyError(f"component {component.name!r}: no FMU script for model {component.model!r} "
-                       f"(known: {', '.join(sorted(classes))})")
-    cls = classes[component.model]
-    values = {**component.parameters, **component.inputs}
+    cls = _slave_class(component, classes)
     try:
-        model, starts = cls.model_of(values)
+        model, starts = cls.model_of({**component.parameters, **component.inputs})
     except KeyError as exc:
-        raise KeyError(f"component {component.name!r} ({component.model}) has no variable {exc.args[0]!r}") from None
+        raise _no_variable(component, exc.args[0]) from None
     except ValueError as exc:
-        raise ValueError(f"component {component.name!r} ({component.model}): {exc}") from None
+        raise _bad_parameters(component, exc) from None
     return ModelOnly(cls, model, [float(starts[n]) for n in model.INPUTS])
 
 
