@@ -120,6 +120,31 @@ def test_a_shafts_detectable_value_is_the_profiled_deflection_where_recorded():
     assert BI._combine([{k: v for k, v in rec.items() if k != "deflection_profiled"}])["detect_value"] == 40.0
 
 
+def test_claimable_asks_whether_the_effect_lowers_the_truths_own_error_on_every_sensor():
+    """The no-worse target applied to the truth: the effect's deterministic part, added
+    to the truth without it, must not raise any sensor's error against the data."""
+    y = 100.0 + _noise(len(t), FS, 0.3, seed=3)
+    d = 0.05 * np.sin(2 * math.pi * 3.0 * t)
+    base = np.full(len(t), 100.0)
+    # the data carry the effect: its error falls by what the effect explains
+    r = BI.no_worse_record(y + d, base + d, base)
+    assert r["error_with_N"] < r["error_without_N"] and r["error_rise"] < 0
+    # the data do not: the rise is (|d|^2 - 2 <d, noise>) / (2 |noise|^2) to first order
+    r = BI.no_worse_record(y, base + d, base)
+    n = y - base
+    expect = (np.sum(d ** 2) - 2 * np.dot(d, n)) / (2 * np.sum(n ** 2))
+    assert r["error_rise"] == pytest.approx(expect, rel=0.05) and r["error_rise"] > 0
+    rec = {"snr_where": 9.0, "snr_all": 10.0}
+    better, worse = BI.no_worse_record(y + d, base + d, base), BI.no_worse_record(y, base + d, base)
+    assert BI._combine([dict(rec, **better)] * 2)["claimable"] is True
+    c = BI._combine([dict(rec, **better), dict(rec, **worse)])
+    assert c["claimable"] is False and c["worst_error_rise"] == worse["error_rise"]
+    # a rise within rounding is no rise (the target's own tolerance)
+    assert BI._combine([dict(rec, error_rise=0.5 * BI.WORSE_RTOL)])["claimable"] is True
+    # records made before it was measured: not known, not false
+    assert "claimable" not in BI._combine([rec])
+
+
 def test_backlash_visibility_needs_a_torque_reversal():
     noise = _noise(len(t), FS, 0.3, seed=2)
     y0 = np.full(len(t), 100.0)
@@ -165,6 +190,10 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
             assert v["delta_rms_N"] > 0 and math.isfinite(v["snr_where"])
             assert v["deflection_where"] >= 0 and math.isfinite(v["snr_where_without_ripple"])
     assert "deflection_where" in det and "snr_where_without_ripple" in det
+    # each record says whether the shaft lowers the truth's own error there; the effect is
+    # claimable where it does on every one
+    rises = [v["error_rise"] for rr in det["runs"] for v in rr["sensors"].values()]
+    assert det["worst_error_rise"] == max(rises) and det["claimable"] == (max(rises) <= BI.WORSE_RTOL)
     # the shaft's detectable value profiles out the ripple's level and the element's inertia
     assert 0 <= det["deflection_profiled"] and det["detect_value"] == max(det["deflection_profiled"],
                                                                           det["snr_where_without_ripple"])
@@ -187,6 +216,15 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     assert s["recall"] == 0.5  # the headline stays over all effects
     row = next(r for r in BI.target_rows(s) if r[3] == "drive_recall")
     assert "all: 50 % (1/2); detectable only: 100 % (1/1)" in row[1] and "named possible" not in row[1]
+    assert "claimable" not in row[1] and s["drive"]["claim_measured"] == 0
+    # where measured: of the detectable, those the truth's own model takes in with no sensor worse
+    t2c = dict(t2, effects=[dict(t2["effects"][0], detectable={"detectable": True, "claimable": False}),
+                            t2["effects"][1]])
+    sc = BI.target_scores([{"truth": t2c, "report": rep}])
+    assert {k: sc["drive"][k] for k in ("claim_measured", "claimable", "matched_claimable")} == \
+        {"claim_measured": 1, "claimable": 0, "matched_claimable": 0}
+    row = next(r for r in BI.target_rows(sc) if r[3] == "drive_recall")
+    assert "; of those, 0 the truth's own model takes in with no sensor worse: - (0/0)" in row[1]
     # a shaft named possible but not claimed is no find; counted beside, with those on a drive
     # without a hidden shaft
     other = next(e for e in ("unwind", "rewind", "sw_leader") if e != el)
