@@ -69,6 +69,7 @@ def measure_seed(seed, out):
             rows.append({"seed": seed, "case": case.id, "element": e["element"], "kind": e["kind"],
                          "detectable": d["detectable"], "detect_value": d["detect_value"],
                          "claimable": d.get("claimable"), "worst_error_rise": d.get("worst_error_rise"),
+                         "held_out_claimable": d.get("held_out_claimable"),
                          "found": (e["element"], e["kind"]) in found,
                          "same_case": old is not None and math.isclose(old, d["detect_value"], rel_tol=1e-3)})
     return rows
@@ -77,8 +78,9 @@ def measure_seed(seed, out):
 def table(rows):
     """Markdown: per kind, the detectable effects split by claimable, found in each part."""
     out = ["| kind | detectable (same case as the first look) | claimable: found | not claimable: found "
-           "| rise the effect brings to the truth's own error where not claimable (median, max) |",
-           "|---|---|---|---|---|"]
+           "| rise the effect brings to the truth's own error where not claimable (median, max) "
+           "| of the claimable, claimable on the held-out run too |",
+           "|---|---|---|---|---|---|"]
     for kind in DRIVE:
         det = [r for r in rows if r["kind"] == kind and r["same_case"] and r["detectable"]
                and r["claimable"] is not None]
@@ -86,8 +88,10 @@ def table(rows):
         no = [r for r in det if not r["claimable"]]
         rises = sorted(r["worst_error_rise"] for r in no)
         med = f"{rises[len(rises) // 2]:.2g}, {rises[-1]:.2g}" if rises else "-"
+        held = [r for r in yes if r.get("held_out_claimable") is not None]
         out.append(f"| {kind} | {len(det)} | {sum(r['found'] for r in yes)} of {len(yes)} "
-                   f"| {sum(r['found'] for r in no)} of {len(no)} | {med} |")
+                   f"| {sum(r['found'] for r in no)} of {len(no)} | {med} "
+                   f"| {sum(r['held_out_claimable'] for r in held)} of {len(held)} |")
     skipped = sum(not r["same_case"] for r in rows)
     if skipped:
         out += ["", f"{skipped} effect(s) left out: the seed now draws another case than its first look did."]

@@ -1221,6 +1221,36 @@ def detectability(truth, folder, *, simulate=None):
                     per.append(v)
                 runs.append(rec)
             out[i] = {**_combine(per), "runs": runs}
+            held = _held_out_no_worse(truth, truth_layout, wo, facts, simulate, fields)
+            if held:
+                rises = [v["error_rise"] for h in held for v in h["sensors"].values()]
+                out[i].update(held_out=held, held_out_worst_error_rise=max(rises),
+                              held_out_claimable=bool(max(rises) <= WORSE_RTOL))
+    return out
+
+
+def _held_out_no_worse(truth, truth_layout, without, facts, simulate, fields):
+    """:func:`no_worse_record` of an effect on each held-out run ([{run, sensors}]): the
+    target counts a sensor worse there too, which the fit runs' check cannot see."""
+    from webline.orchestrator.layout import load_system
+    out = []
+    for r in truth["runs"]:
+        if not r["holdout"]:
+            continue
+        run = IRunSpec(**{k: v for k, v in r["spec"].items() if k in fields})
+        t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
+        ov0 = B._overrides(r["truth_conditions"])
+        measured = simulate(load_system(truth_layout, {**ov0, **r.get("ripple_set", {})}), t)
+        res, res0 = simulate(load_system(truth_layout, ov0), t), simulate(load_system(without, ov0), t)
+        tt = np.asarray(res.time, float)
+        settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)
+        rng = np.random.default_rng(run.seed)
+        rec = {"run": r["name"], "sensors": {}}
+        for lc in sorted(facts["_sensors"]):
+            m, _ = measure(tt, np.asarray(measured[f"{lc}.T"], float), run, rng)   # the case's draws
+            rec["sensors"][lc] = no_worse_record(m[settle], np.asarray(res[f"{lc}.T"], float)[settle],
+                                                 np.asarray(res0[f"{lc}.T"], float)[settle])
+        out.append(rec)
     return out
 
 

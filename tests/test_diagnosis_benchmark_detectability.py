@@ -194,6 +194,7 @@ def test_drive_detectability_of_a_made_case_and_the_scorer(tmp_path):
     # claimable where it does on every one
     rises = [v["error_rise"] for rr in det["runs"] for v in rr["sensors"].values()]
     assert det["worst_error_rise"] == max(rises) and det["claimable"] == (max(rises) <= BI.WORSE_RTOL)
+    assert not any(r["holdout"] for r in truth["runs"]) and "held_out" not in det   # one run, no held-out
     # the shaft's detectable value profiles out the ripple's level and the element's inertia
     assert 0 <= det["deflection_profiled"] and det["detect_value"] == max(det["deflection_profiled"],
                                                                           det["snr_where_without_ripple"])
@@ -292,6 +293,14 @@ def test_periodic_detectability_of_a_made_case_counts_the_ripple_as_noise(tmp_pa
             # torque: tenths of the error at most): not the error alone, close to it
             assert v["noise_rms_N"] != pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=1e-9)
             assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=0.5)
+    # a run-out the data show lowers the truth's own error everywhere, on the held-out run too
+    # (which the target counts as well)
+    assert det["claimable"] is True and det["worst_error_rise"] < 0
+    held = [r["name"] for r in truth["runs"] if r["holdout"]]
+    assert held and [h["run"] for h in det["held_out"]] == held
+    rises = [v["error_rise"] for h in det["held_out"] for v in h["sensors"].values()]
+    assert det["held_out_worst_error_rise"] == max(rises)
+    assert det["held_out_claimable"] == (max(rises) <= BI.WORSE_RTOL)
     wo = BI._layout_without(truth, doc, tmp_path / case.id / "blind" / "line.yaml", 0)["set"]
     el = case.effects[0].element
     assert any(k.startswith(f"path.{el}.") and k not in wo for k in truth["set"])
