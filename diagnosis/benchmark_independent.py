@@ -1247,9 +1247,11 @@ def _held_out_no_worse(truth, truth_layout, without, facts, simulate, fields):
         rng = np.random.default_rng(run.seed)
         rec = {"run": r["name"], "sensors": {}}
         for lc in sorted(facts["_sensors"]):
-            m, _ = measure(tt, np.asarray(measured[f"{lc}.T"], float), run, rng)   # the case's draws
-            rec["sensors"][lc] = no_worse_record(m[settle], np.asarray(res[f"{lc}.T"], float)[settle],
-                                                 np.asarray(res0[f"{lc}.T"], float)[settle])
+            clean = np.asarray(measured[f"{lc}.T"], float)
+            m, _ = measure(tt, clean, run, rng)   # the case's draws
+            rec["sensors"][lc] = dict(no_worse_record(m[settle], np.asarray(res[f"{lc}.T"], float)[settle],
+                                                      np.asarray(res0[f"{lc}.T"], float)[settle]),
+                                      noise_rms_N=float(np.sqrt(np.mean((m - clean)[settle] ** 2))))
         out.append(rec)
     return out
 

@@ -301,6 +301,11 @@ def test_periodic_detectability_of_a_made_case_counts_the_ripple_as_noise(tmp_pa
     rises = [v["error_rise"] for h in det["held_out"] for v in h["sensors"].values()]
     assert det["held_out_worst_error_rise"] == max(rises)
     assert det["held_out_claimable"] == (max(rises) <= BI.WORSE_RTOL)
+    # against the error the case injected there (regenerated from the run's seed)
+    for h in det["held_out"]:
+        r = next(r for r in truth["runs"] if r["name"] == h["run"])
+        for lc, v in h["sensors"].items():
+            assert v["noise_rms_N"] == pytest.approx(r["sensors"][lc]["noise_rms_N"], rel=1e-9)
     wo = BI._layout_without(truth, doc, tmp_path / case.id / "blind" / "line.yaml", 0)["set"]
     el = case.effects[0].element
     assert any(k.startswith(f"path.{el}.") and k not in wo for k in truth["set"])
