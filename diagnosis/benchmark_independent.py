@@ -1155,12 +1155,13 @@ def detectability(truth, folder, *, simulate=None):
     truth_layout = folder / "truth" / "truth_layout.yaml"
     if not truth_layout.exists():
         truth_layout = Path(truth["truth_layout"])
-    out = {}
+    out, withouts = {}, {}
     fields = set(IRunSpec.__dataclass_fields__)
     with tempfile.TemporaryDirectory() as tmp:
         for i, e in enumerate(truth["effects"]):
             periodic = e["kind"] in B.PERIODIC
-            wo = B.write_yaml(Path(tmp) / f"without{i}.yaml", _layout_without(truth, line_doc, line_path, i))
+            wo = withouts[i] = B.write_yaml(Path(tmp) / f"without{i}.yaml",
+                                            _layout_without(truth, line_doc, line_path, i))
             # a shaft's rigid alternative at the inertia a data sheet allows too: the element
             # keeps its load-side inertia alone (the motor's share is within the -30 % tolerance)
             light = B.write_yaml(Path(tmp) / f"light{i}.yaml", _layout_light(truth, line_path, e)) \
@@ -1221,7 +1222,7 @@ def detectability(truth, folder, *, simulate=None):
                     per.append(v)
                 runs.append(rec)
             out[i] = {**_combine(per), "runs": runs}
-            held = _held_out_no_worse(truth, truth_layout, wo, facts, simulate, fields)
+        for i, held in _held_out_no_worse(truth, truth_layout, withouts, facts, simulate, fields).items():
             if held:
                 rises = [v["error_rise"] for h in held for v in h["sensors"].values()]
                 out[i].update(held_out=held, held_out_worst_error_rise=max(rises),
@@ -1229,11 +1230,13 @@ def detectability(truth, folder, *, simulate=None):
     return out
 
 
-def _held_out_no_worse(truth, truth_layout, without, facts, simulate, fields):
-    """:func:`no_worse_record` of an effect on each held-out run ([{run, sensors}]): the
-    target counts a sensor worse there too, which the fit runs' check cannot see."""
+def _held_out_no_worse(truth, truth_layout, withouts, facts, simulate, fields):
+    """{effect index: [{run, sensors}]}: :func:`no_worse_record` of each effect (its layout
+    without it in ``withouts``) on each held-out run: the target counts a sensor worse there
+    too, which the fit runs' check cannot see. The truth's measured and ripple-free runs are
+    simulated once per run, whatever the number of effects."""
     from webline.orchestrator.layout import load_system
-    out = []
+    out = {i: [] for i in withouts}
     for r in truth["runs"]:
         if not r["holdout"]:
             continue
@@ -1241,18 +1244,21 @@ def _held_out_no_worse(truth, truth_layout, without, facts, simulate, fields):
         t = np.arange(0.0, run.duration_s + 0.5 / run.fs_hz, 1.0 / run.fs_hz)
         ov0 = B._overrides(r["truth_conditions"])
         measured = simulate(load_system(truth_layout, {**ov0, **r.get("ripple_set", {})}), t)
-        res, res0 = simulate(load_system(truth_layout, ov0), t), simulate(load_system(without, ov0), t)
+        res = simulate(load_system(truth_layout, ov0), t)
         tt = np.asarray(res.time, float)
         settle = tt >= tt[0] + min(1.0, 0.1 * run.duration_s)
         rng = np.random.default_rng(run.seed)
-        rec = {"run": r["name"], "sensors": {}}
-        for lc in sorted(facts["_sensors"]):
+        meas = {}
+        for lc in sorted(facts["_sensors"]):   # the case's draws, in the order it drew them
             clean = np.asarray(measured[f"{lc}.T"], float)
-            m, _ = measure(tt, clean, run, rng)   # the case's draws
-            rec["sensors"][lc] = dict(no_worse_record(m[settle], np.asarray(res[f"{lc}.T"], float)[settle],
-                                                      np.asarray(res0[f"{lc}.T"], float)[settle]),
-                                      noise_rms_N=float(np.sqrt(np.mean((m - clean)[settle] ** 2))))
-        out.append(rec)
+            m, _ = measure(tt, clean, run, rng)
+            meas[lc] = (m[settle], float(np.sqrt(np.mean((m - clean)[settle] ** 2))))
+        for i, without in withouts.items():
+            res0 = simulate(load_system(without, ov0), t)
+            out[i].append({"run": r["name"], "sensors": {
+                lc: dict(no_worse_record(m, np.asarray(res[f"{lc}.T"], float)[settle],
+                                         np.asarray(res0[f"{lc}.T"], float)[settle]), noise_rms_N=noise)
+                for lc, (m, noise) in meas.items()}})
     return out
 
 
