@@ -132,7 +132,7 @@ class LineModel:
         # ... and the last ones made, released or not (:meth:`_remember`): a stage asks again
         # for simulations an earlier stage had released (seed-62 c01: 85 of 1030 asked for
         # were made before, 12 of them still held; 50 asked for more than 64 requests later)
-        self._recent = collections.OrderedDict()   # key -> (Sim, bytes), the last RECENT_BYTES
+        self._recent = collections.OrderedDict()   # key -> (Sim, bytes, job), the last RECENT_BYTES
         self._read = collections.OrderedDict()     # key -> what ReadColumns needs, the last READ_BYTES
         self.n_refilled = 0
         # small results derived from simulations (a probe's PSDs), kept after the Sims are
