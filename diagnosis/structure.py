@@ -971,8 +971,8 @@ def screen(d):
     # ... and in lines within the data sheet's tolerances around that form: a phantom absorbs
     # the part of the primary's line that the form passes to the other zone too weakly, and the
     # leakage through the S-wrap hangs on what a data sheet leaves open (the leader's inertia,
-    # the current loops' lags); a real second source's own phase and amplitude no such line gives
-    # the best predicted swap in that form: a hypothesis of its own for the lines and drive forms
+    # the current loops' lags); a real second source's own phase and amplitude no such line gives.
+    # The best predicted swap in that form is a hypothesis of its own, for the lines and the drive forms
     sw = min((x[0] for x in pars_a if "swap" in x[0] and x[0]["form"] == f_best.get("form")),
              key=lambda e: e["predicted_score"], default=None) if sec_fes and f_best is not None else None
     if sec_fes and f_best is not None:
@@ -1000,10 +1000,11 @@ def screen(d):
                   for name, desc, sets, sh in sf if sh[1] == "compliance"]
         if any(sh[1] == "backlash" for *_, sh in sf):
             combos += dead_zone_forms(d, cur_sims, [(f_best["form"], f_best["description"], f_best["set"])])
-        # ... and with the swap too: a drive form may need the primary source the swap names
-        # (independent seed-65 c05: the leader's 5.3 Hz shaft fitted 0.141 in 'feedforward none
-        # + web damping 2 ms' with a phantom roller19, never tried with idler_r1 alone in place
-        # of idler_u1, and a dead zone in the layout's form, tried with it, took its place)
+        # ... and with the swap too, as the stage A forms are: a drive form may need the primary
+        # source the swap names (independent seed-65 c05: the leader's 5.3 Hz shaft fitted 0.141
+        # in 'feedforward none + web damping 2 ms' with a phantom roller19, and was never tried
+        # with idler_r1 alone in place of idler_u1, the set a dead zone was claimed with; tried,
+        # it fits 0.190-0.220 there, the dead zone 0.171, and the dead zone is still claimed)
         uses = [(None, None)] + ([(effs_p, None)] if sec_fes else [])
         if sw is not None:
             uses.append((sw["_use"], (sw["swap"]["replaced"], sw["swap"]["by"])))
