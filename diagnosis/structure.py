@@ -241,30 +241,11 @@ def readmit_orders(effs):
     return shown, out
 
 
-def dead_zone_bases(forms):
-    """The forms a dead zone is tried in: every feed-forward form of ``forms`` (the
-    :func:`alternatives`), alone and with each of the web's and the load cells' forms, and
-    with both of these at once.
-    What a dead zone leaves hangs on how the free-running roller rings against the web and
-    how the load cells pass that ring, which no rigid form shows: independent seed-64 c12's
-    2.7 deg leader dead zone, the truth's run-outs in the data sheet's line, fitted 1.022
-    (sum of NRMSE^2) in 'feedforward reference', 0.955 with 2 ms of web damping beside it
-    and 0.895 with second-order load cells too (the truth 0.890); the rigid forms gained
-    nothing from either (1.112, 1.086, 1.082), and the leader was claimed a 1.03 Hz shaft."""
-    one = {name: (desc, sets) for name, desc, sets in forms}
-    out = [(name, desc, sets) for name, desc, sets in forms if name.startswith("feedforward")]
-    both = ("web damping 2 ms", "load-cell filter order 2")
-    for a in ("feedforward none", "feedforward reference"):
-        if a in one and all(b in one for b in both):
-            out.append((f"{a} + {both[0]} + {both[1]}", "; ".join(one[x][0] for x in (a, *both)),
-                        {k: v for x in (a, *both) for k, v in one[x][1].items()}))
-    return out
-
-
-def dead_zone_forms(d, sims, forms, names=None):
+def dead_zone_forms(d, sims, forms, names=("feedforward none", "feedforward reference")):
     """Dead zones on the drives whose torque the current model (``sims``) swings through
-    or near zero, as model forms beside each form of ``forms`` (those named ``names``,
-    every one if None): [(name, description, sets, (element, "backlash", width deg))].
+    or near zero, as model forms beside each feed-forward form of ``forms`` (the
+    :func:`alternatives`; those named ``names``, every one if None): [(name, description,
+    sets, (element, "backlash", width deg))].
     A dead zone changes how a periodic source's line passes the drive, and it does so
     in the form that passes the line as the line does: independent seed-10 c24's leader
     backlash (1.2 deg) beside an eccentric idler, simulated with the truth's run-out in
@@ -854,7 +835,7 @@ def screen(d):
     # shafts on the driven rollers: a form of the line's transfer between the zones
     sf = shaft_forms(d, [e for e in effs if e[2] is not None])
     # ... and dead zones in the drives the periodic sources swing through zero
-    sf += dead_zone_forms(d, cur_sims, dead_zone_bases(alts)) if effs else []
+    sf += dead_zone_forms(d, cur_sims, alts) if effs else []
     drive_forms = {name: sh for name, _, _, sh in sf}
     alts += [(name, desc, sets) for name, desc, sets, _ in sf]
     # the full set is screened in the other forms too: a second source's amplitude is
@@ -971,10 +952,7 @@ def screen(d):
     # ... and in lines within the data sheet's tolerances around that form: a phantom absorbs
     # the part of the primary's line that the form passes to the other zone too weakly, and the
     # leakage through the S-wrap hangs on what a data sheet leaves open (the leader's inertia,
-    # the current loops' lags); a real second source's own phase and amplitude no such line gives.
-    # The best predicted swap in that form is a hypothesis of its own, for the lines and the drive forms
-    sw = min((x[0] for x in pars_a if "swap" in x[0] and x[0]["form"] == f_best.get("form")),
-             key=lambda e: e["predicted_score"], default=None) if sec_fes and f_best is not None else None
+    # the current loops' lags); a real second source's own phase and amplitude no such line gives
     if sec_fes and f_best is not None:
         variants = [(effs_p, None, None)]
         # ... with the orders taken back too: the lines carry the form's error as the forms do
@@ -983,6 +961,8 @@ def screen(d):
         shown_p, effs_pr = readmit_orders(effs_p)
         if shown_p:
             variants.append((effs_pr, None, shown_p))
+        sw = min((x[0] for x in pars_a if "swap" in x[0] and x[0]["form"] == f_best.get("form")),
+                 key=lambda e: e["predicted_score"], default=None)
         if sw is not None:
             variants.append((sw["_use"], (sw["swap"]["replaced"], sw["swap"]["by"]), None))
         _tolerance_lines(d, f_best, zero, variants, stage_a_one, stage_a, stage_b, to_b)
@@ -999,32 +979,19 @@ def screen(d):
         combos = [(f"{f_best['form']} + {name}", f"{f_best['description']}; {desc}", {**f_best["set"], **sets}, sh)
                   for name, desc, sets, sh in sf if sh[1] == "compliance"]
         if any(sh[1] == "backlash" for *_, sh in sf):
-            combos += dead_zone_forms(d, cur_sims, [(f_best["form"], f_best["description"], f_best["set"])])
-        # ... and with the swap too, as the stage A forms are: a drive form may need the primary
-        # source the swap names (independent seed-65 c05: the leader's 5.3 Hz shaft fitted 0.141
-        # in 'feedforward none + web damping 2 ms' with a phantom roller19, and was never tried
-        # with idler_r1 alone in place of idler_u1, the set a dead zone was claimed with; tried,
-        # it fits 0.190-0.220 there, the dead zone 0.171, and the dead zone is still claimed)
-        uses = [(None, None)] + ([(effs_p, None)] if sec_fes else [])
-        if sw is not None:
-            uses.append((sw["_use"], (sw["swap"]["replaced"], sw["swap"]["by"])))
+            combos += dead_zone_forms(d, cur_sims, [(f_best["form"], f_best["description"], f_best["set"])],
+                                      names=None)
         for name, desc, sets, sh in combos:
-            if name in drive_forms:
-                # a form's dead zone screened already, maybe only predicted: each variant simulated
-                for x in stage_a:
-                    if x[0]["form"] == name and all(x is not y for y in to_b) and (
-                            "swap" not in x[0] or (sw is not None and x[0]["swap"] == sw["swap"])):
-                        stage_b(*x)
-                        to_b.append(x)
+            if name in drive_forms:   # a feed-forward form's dead zone, screened already
                 continue
             drive_forms[name] = sh
             # ... and without the secondary sources: a shaft that passes the lines between the
             # zones as the line does leaves a phantom at a primary source's frequency nothing to
             # carry (independent seed-28 c24: roller9 at roller19's 4.57 Hz, 15 um, kept beside the
             # leader's shaft at 9.35 Hz, the set without it tried only in the forms without that shaft)
-            for use, swap in uses:
+            for use in ((None, effs_p) if sec_fes else (None,)):
                 n0 = len(stage_a)
-                stage_a_one(name, desc, sets, use, swap=swap)
+                stage_a_one(name, desc, sets, use)
                 if len(stage_a) > n0:
                     stage_b(*stage_a[-1])
                     to_b.append(stage_a[-1])
